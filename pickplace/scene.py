@@ -1,0 +1,331 @@
+"""Open a pick-and-place scene and resolve the named handles the pipeline needs.
+
+The scene contract (names a scene file must define) is :class:`SceneNames`; its defaults match
+``scenes/scene.xml``. Every missing name raises :class:`~pickplace.errors.UnknownNameError`
+listing the names of that kind that do exist.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from mink.lie import SE3, SO3
+
+from pickplace.errors import SceneError, UnknownNameError
+
+
+def _scenes_dir() -> Path:
+    """``scenes/`` of a source checkout, or the copy installed as ``pickplace/scenes``."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "scenes", here / "scenes"):
+        if (candidate / "scene.xml").is_file():
+            return candidate
+    return here.parent / "scenes"
+
+
+SCENES_DIR = _scenes_dir()
+DEFAULT_SCENE = SCENES_DIR / "scene.xml"
+
+_OBJ_KIND = {
+    mujoco.mjtObj.mjOBJ_JOINT: "joint",
+    mujoco.mjtObj.mjOBJ_ACTUATOR: "actuator",
+    mujoco.mjtObj.mjOBJ_SITE: "site",
+    mujoco.mjtObj.mjOBJ_BODY: "body",
+    mujoco.mjtObj.mjOBJ_GEOM: "geom",
+    mujoco.mjtObj.mjOBJ_NUMERIC: "custom numeric",
+    mujoco.mjtObj.mjOBJ_KEY: "keyframe",
+}
+
+_OBJ_COUNT = {
+    mujoco.mjtObj.mjOBJ_JOINT: "njnt",
+    mujoco.mjtObj.mjOBJ_ACTUATOR: "nu",
+    mujoco.mjtObj.mjOBJ_SITE: "nsite",
+    mujoco.mjtObj.mjOBJ_BODY: "nbody",
+    mujoco.mjtObj.mjOBJ_GEOM: "ngeom",
+    mujoco.mjtObj.mjOBJ_NUMERIC: "nnumeric",
+    mujoco.mjtObj.mjOBJ_KEY: "nkey",
+}
+
+
+def names_of(model: mujoco.MjModel, obj: mujoco.mjtObj) -> list[str]:
+    """Return the non-empty names of every object of type ``obj`` in ``model``."""
+    count = int(getattr(model, _OBJ_COUNT[obj]))
+    names = (mujoco.mj_id2name(model, obj, i) for i in range(count))
+    return [n for n in names if n]
+
+
+def name_to_id(model: mujoco.MjModel, obj: mujoco.mjtObj, name: str) -> int:
+    """Return the id of the object ``name`` of type ``obj``.
+
+    Raises:
+        UnknownNameError: The name does not exist; the message lists those that do.
+    """
+    idx = mujoco.mj_name2id(model, obj, name)
+    if idx < 0:
+        raise UnknownNameError(_OBJ_KIND[obj], name, names_of(model, obj))
+    return int(idx)
+
+
+@dataclass(frozen=True)
+class SceneNames:
+    """Names a pick-and-place scene must define (defaults: ``scenes/scene.xml``)."""
+
+    arm_joints: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
+    arm_actuators: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
+    speed_limits: str = "arm_joint_speed_limits"
+    gripper_actuator: str = "wsg50/fingers"
+    finger_joints: tuple[str, str] = ("wsg50/left_finger", "wsg50/right_finger")
+    pad_geoms: tuple[str, str] = ("wsg50/left_pad", "wsg50/right_pad")
+    tool_site: str = "wsg50/tool"
+    flange_site: str = "attachment_site"
+    brick_body: str = "brick"
+    brick_geom: str = "brick"
+    source_bin: str = "bin1"
+    target_bin: str = "bin2"
+    home_key: str = "home"
+
+
+@dataclass(frozen=True)
+class BinGeometry:
+    """An open-top bin: a floor box and four walls, described in the bin body's frame B.
+
+    Attributes:
+        name: Body name of the bin.
+        X_WB: Pose of the bin frame in world (z up, origin below the floor centre).
+        inner_half_extents: Half-lengths [m] of the free floor area along B's x and y,
+            measured between the inner faces of the walls.
+        floor_top_z: Height [m] of the floor's top face in world.
+        wall_top_z: Height [m] of the walls' top faces in world.
+    """
+
+    name: str
+    X_WB: SE3
+    inner_half_extents: np.ndarray
+    floor_top_z: float
+    wall_top_z: float
+
+    def to_bin_frame(self, p_W: np.ndarray) -> np.ndarray:
+        """Express world points ``p_W`` (..., 3) in the bin frame B."""
+        X_BW = self.X_WB.inverse()
+        R_BW = X_BW.rotation().as_matrix()
+        return np.asarray(p_W) @ R_BW.T + X_BW.translation()
+
+    def contains_xy(self, p_W: np.ndarray, margin: float = 0.0) -> bool:
+        """True if every point of ``p_W`` (N, 3) lies over the floor, ``margin`` [m] inside."""
+        p_B = self.to_bin_frame(np.atleast_2d(p_W))
+        limit = self.inner_half_extents - margin
+        return bool(np.all(np.abs(p_B[:, :2]) <= limit))
+
+    @property
+    def center_W(self) -> np.ndarray:
+        """Centre of the floor's top face in world [m]."""
+        p = self.X_WB.translation().copy()
+        p[2] = self.floor_top_z
+        return p
+
+
+def _bin_geometry(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> BinGeometry:
+    body_id = name_to_id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+    geom_ids = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body_id]
+    floor_name = f"{name}_floor"
+    floor_id = name_to_id(model, mujoco.mjtObj.mjOBJ_GEOM, floor_name)
+    walls = [
+        g for g in geom_ids if g != floor_id and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX
+    ]
+    if len(walls) < 4:
+        raise SceneError(
+            f"bin '{name}' needs a floor geom '{floor_name}' and 4 box walls, found {len(walls)} walls"
+        )
+    # Inner faces: for each wall, the face nearer the bin centre along its thin axis.
+    inner = np.array([np.inf, np.inf])
+    wall_top = -np.inf
+    for g in walls:
+        pos, size = model.geom_pos[g], model.geom_size[g]
+        axis = int(np.argmin(size[:2]))  # the wall's thickness direction in B
+        inner[axis] = min(inner[axis], abs(pos[axis]) - size[axis])
+        wall_top = max(wall_top, pos[2] + size[2])
+    floor_top = model.geom_pos[floor_id][2] + model.geom_size[floor_id][2]
+    X_WB = SE3.from_rotation_and_translation(
+        SO3(np.array(data.xquat[body_id])), np.array(data.xpos[body_id])
+    )
+    base_z = float(data.xpos[body_id][2])
+    return BinGeometry(
+        name=name,
+        X_WB=X_WB,
+        inner_half_extents=inner,
+        floor_top_z=base_z + float(floor_top),
+        wall_top_z=base_z + float(wall_top),
+    )
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A compiled scene and the ids of everything the pipeline touches.
+
+    Attributes:
+        model: The compiled MuJoCo model.
+        path: The scene file.
+        names: The names that were resolved.
+        arm_joint_ids: Joint ids of the 7 arm joints, base to flange.
+        arm_qpos_adr: qpos addresses of the arm joints.
+        arm_dof_adr: dof (qvel) addresses of the arm joints.
+        q_min: Lower joint limits [rad].
+        q_max: Upper joint limits [rad].
+        v_max: Joint speed limits [rad/s], from the model's custom numeric data.
+        arm_actuator_ids: Position actuators of the arm joints.
+        gripper_actuator_id: Position actuator of the finger gap [m].
+        finger_qpos_adr: qpos addresses of the two finger joints (gap = sum) [m].
+        gripper_max_gap: Largest commandable finger gap [m].
+        gripper_force_limit: Actuator force bound = squeeze per jaw [N].
+        pad_geom_ids: Geoms of the left and right finger pads.
+        tool_site_id: Site at the grasp point, z along the approach direction.
+        flange_site_id: Site at the arm's flange.
+        brick_body_id: Free body of the brick.
+        brick_geom_id: Box geom of the brick.
+        brick_qpos_adr: First qpos address of the brick's free joint (xyz, wxyz).
+        brick_dof_adr: First dof address of the brick's free joint.
+        brick_half_extents: Half sizes of the brick box [m].
+        brick_mass: Mass of the brick [kg].
+        source_bin: Bin the brick starts in.
+        target_bin: Bin the brick must end in.
+        home_key_id: Keyframe with the arm's home posture.
+        q_home: Arm joint positions of the home keyframe [rad].
+    """
+
+    model: mujoco.MjModel
+    path: Path
+    names: SceneNames
+    arm_joint_ids: np.ndarray
+    arm_qpos_adr: np.ndarray
+    arm_dof_adr: np.ndarray
+    q_min: np.ndarray
+    q_max: np.ndarray
+    v_max: np.ndarray
+    arm_actuator_ids: np.ndarray
+    gripper_actuator_id: int
+    finger_qpos_adr: np.ndarray
+    gripper_max_gap: float
+    gripper_force_limit: float
+    pad_geom_ids: tuple[int, int]
+    tool_site_id: int
+    flange_site_id: int
+    brick_body_id: int
+    brick_geom_id: int
+    brick_qpos_adr: int
+    brick_dof_adr: int
+    brick_half_extents: np.ndarray
+    brick_mass: float
+    source_bin: BinGeometry
+    target_bin: BinGeometry
+    home_key_id: int
+    q_home: np.ndarray = field(repr=False)
+
+    @property
+    def arm_joint_names(self) -> tuple[str, ...]:
+        """Names of the arm joints, base to flange."""
+        return self.names.arm_joints
+
+    def make_data(self) -> mujoco.MjData:
+        """Return fresh MjData reset to the home keyframe."""
+        data = mujoco.MjData(self.model)
+        mujoco.mj_resetDataKeyframe(self.model, data, self.home_key_id)
+        mujoco.mj_forward(self.model, data)
+        return data
+
+
+def compile_scene(path: Path) -> mujoco.MjModel:
+    """Compile an MJCF file, turning every failure into a :class:`SceneError`."""
+    path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
+    if not path.exists():
+        raise SceneError(f"scene file '{path}' does not exist")
+    if not path.is_file():
+        raise SceneError(f"scene path '{path}' is not a file")
+    try:
+        return mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:  # MuJoCo reports parse and compile errors as ValueError.
+        detail = " ".join(str(exc).split())
+        raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
+
+
+def load_scene(path: str | Path | None = None, names: SceneNames | None = None) -> Scene:
+    """Compile a scene file and resolve every handle of the scene contract.
+
+    Args:
+        path: MJCF file; default ``scenes/scene.xml``.
+        names: Names to resolve; default :class:`SceneNames`.
+
+    Raises:
+        SceneError: The file is missing, not valid MJCF or structurally wrong.
+        UnknownNameError: A required name is missing (the message lists those that exist).
+    """
+    path = (Path(path) if path is not None else DEFAULT_SCENE).resolve()
+    names = names or SceneNames()
+    model = compile_scene(path)
+    obj = mujoco.mjtObj
+
+    joint_ids = np.array([name_to_id(model, obj.mjOBJ_JOINT, j) for j in names.arm_joints])
+    for j, name in zip(joint_ids, names.arm_joints, strict=True):
+        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE or not model.jnt_limited[j]:
+            raise SceneError(f"arm joint '{name}' must be a limited hinge joint")
+    act_ids = np.array([name_to_id(model, obj.mjOBJ_ACTUATOR, a) for a in names.arm_actuators])
+
+    num_id = name_to_id(model, obj.mjOBJ_NUMERIC, names.speed_limits)
+    adr, size = model.numeric_adr[num_id], model.numeric_size[num_id]
+    v_max = np.array(model.numeric_data[adr : adr + size], dtype=float)
+    if v_max.shape != (len(joint_ids),) or np.any(v_max <= 0):
+        raise SceneError(
+            f"custom numeric '{names.speed_limits}' must hold {len(joint_ids)} positive joint "
+            f"speed limits [rad/s], got {v_max.tolist()}"
+        )
+
+    grip_id = name_to_id(model, obj.mjOBJ_ACTUATOR, names.gripper_actuator)
+    finger_ids = [name_to_id(model, obj.mjOBJ_JOINT, j) for j in names.finger_joints]
+    pad_ids = (
+        name_to_id(model, obj.mjOBJ_GEOM, names.pad_geoms[0]),
+        name_to_id(model, obj.mjOBJ_GEOM, names.pad_geoms[1]),
+    )
+    brick_body = name_to_id(model, obj.mjOBJ_BODY, names.brick_body)
+    brick_geom = name_to_id(model, obj.mjOBJ_GEOM, names.brick_geom)
+    brick_jnt = int(model.body_jntadr[brick_body])
+    if brick_jnt < 0 or model.jnt_type[brick_jnt] != mujoco.mjtJoint.mjJNT_FREE:
+        raise SceneError(f"brick body '{names.brick_body}' must have a free joint")
+    if model.geom_type[brick_geom] != mujoco.mjtGeom.mjGEOM_BOX:
+        raise SceneError(f"brick geom '{names.brick_geom}' must be a box")
+    home = name_to_id(model, obj.mjOBJ_KEY, names.home_key)
+
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, home)
+    mujoco.mj_forward(model, data)
+    qpos_adr = model.jnt_qposadr[joint_ids].copy()
+    return Scene(
+        model=model,
+        path=path,
+        names=names,
+        arm_joint_ids=joint_ids,
+        arm_qpos_adr=qpos_adr,
+        arm_dof_adr=model.jnt_dofadr[joint_ids].copy(),
+        q_min=model.jnt_range[joint_ids, 0].copy(),
+        q_max=model.jnt_range[joint_ids, 1].copy(),
+        v_max=v_max,
+        arm_actuator_ids=act_ids,
+        gripper_actuator_id=grip_id,
+        finger_qpos_adr=model.jnt_qposadr[finger_ids].copy(),
+        gripper_max_gap=float(model.actuator_ctrlrange[grip_id, 1]),
+        gripper_force_limit=float(model.actuator_forcerange[grip_id, 1]),
+        pad_geom_ids=pad_ids,
+        tool_site_id=name_to_id(model, obj.mjOBJ_SITE, names.tool_site),
+        flange_site_id=name_to_id(model, obj.mjOBJ_SITE, names.flange_site),
+        brick_body_id=brick_body,
+        brick_geom_id=brick_geom,
+        brick_qpos_adr=int(model.jnt_qposadr[brick_jnt]),
+        brick_dof_adr=int(model.jnt_dofadr[brick_jnt]),
+        brick_half_extents=model.geom_size[brick_geom].copy(),
+        brick_mass=float(model.body_mass[brick_body]),
+        source_bin=_bin_geometry(model, data, names.source_bin),
+        target_bin=_bin_geometry(model, data, names.target_bin),
+        home_key_id=home,
+        q_home=data.qpos[qpos_adr].copy(),
+    )
