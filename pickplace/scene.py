@@ -137,7 +137,8 @@ def _bin_geometry(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> BinG
     ]
     if len(walls) < 4:
         raise SceneError(
-            f"bin '{name}' needs a floor geom '{floor_name}' and 4 box walls, found {len(walls)} walls"
+            f"bin '{name}' needs a floor geom '{floor_name}' and 4 box walls, "
+            f"found {len(walls)} walls"
         )
     # Inner faces: for each wall, the face nearer the bin centre along its thin axis.
     inner = np.array([np.inf, np.inf])

@@ -1,0 +1,94 @@
+"""Jacobian health: singular values, condition number, manipulability, and Jᵀ statics.
+
+Manipulability measures follow seed notes 003 (Sciavicco & Siciliano / Yoshikawa), for a
+Jacobian J (m × n, m ≤ n) with singular values σ₁ ≥ … ≥ σₘ:
+
+- w1 = sqrt(det(J Jᵀ)) = Π σᵢ (volume of the velocity ellipsoid),
+- w2 = σmin / σmax (inverse condition number, isotropy),
+- w3 = σmin (the worst direction),
+- w4 = (Π σᵢ)^(1/m) (geometric mean, independent of m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+GRAVITY_W = np.array([0.0, 0.0, -9.81])
+
+
+@dataclass(frozen=True)
+class Manipulability:
+    """Manipulability measures of one Jacobian.
+
+    Attributes:
+        singular_values: σ₁ ≥ … ≥ σₘ.
+        condition: σmax / σmin (inf at a singularity).
+        w1: sqrt(det J Jᵀ).
+        w2: σmin / σmax.
+        w3: σmin.
+        w4: (Π σ)^(1/m).
+    """
+
+    singular_values: np.ndarray
+    condition: float
+    w1: float
+    w2: float
+    w3: float
+    w4: float
+
+    @classmethod
+    def from_singular_values(cls, sigma: np.ndarray) -> Manipulability:
+        """Compute every measure from singular values (any order)."""
+        s = np.sort(np.asarray(sigma, dtype=float))[::-1]
+        smax, smin = float(s[0]), float(s[-1])
+        prod = float(np.prod(s))
+        return cls(
+            singular_values=s,
+            condition=smax / smin if smin > 0.0 else float("inf"),
+            w1=prod,
+            w2=smin / smax if smax > 0.0 else 0.0,
+            w3=smin,
+            w4=prod ** (1.0 / len(s)),
+        )
+
+    def as_array(self) -> np.ndarray:
+        """[w1, w2, w3, w4]."""
+        return np.array([self.w1, self.w2, self.w3, self.w4])
+
+
+@dataclass(frozen=True)
+class JacobianHealth:
+    """Health of the tool-site Jacobian at one configuration.
+
+    Attributes:
+        full: Measures of the 6 × 7 Jacobian [v; ω].
+        translational: Measures of its 3 × 7 translational rows.
+        U_translational: Left singular vectors (3, 3) of the translational Jacobian, columns
+            ordered like ``translational.singular_values``: the axes of the velocity ellipsoid.
+    """
+
+    full: Manipulability
+    translational: Manipulability
+    U_translational: np.ndarray
+
+
+def jacobian_health(J: np.ndarray) -> JacobianHealth:
+    """Compute the SVD-based health of a 6 × n spatial Jacobian [v; ω]."""
+    sigma = np.linalg.svd(J, compute_uv=False)
+    U_t, sigma_t, _ = np.linalg.svd(J[:3], full_matrices=False)
+    return JacobianHealth(
+        full=Manipulability.from_singular_values(sigma),
+        translational=Manipulability.from_singular_values(sigma_t),
+        U_translational=U_t,
+    )
+
+
+def holding_torques(J: np.ndarray, mass: float, gravity_W: np.ndarray = GRAVITY_W) -> np.ndarray:
+    """Joint torques [N m] that hold a load of ``mass`` [kg] at the Jacobian's point (Jᵀ statics).
+
+    The load pulls on the tool with f = mass · g; the arm must push back with −f, so
+    τ = Jᵥᵀ (−mass · g) (seed lecture 001: τ = Jᵀ F).
+    """
+    return J[:3].T @ (-mass * np.asarray(gravity_W))

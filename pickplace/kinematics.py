@@ -1,0 +1,103 @@
+"""Arm-only kinematics for differential IK: tool pose and Jacobian as functions of q.
+
+The IK works on its own model, compiled from the scene with every joint but the arm's removed
+(fingers, the brick's free joint), so that ``nq = nv = 7`` and mink's tasks and limits see
+only the arm. Bodies, sites and geometry are unchanged, so the tool site's forward kinematics
+are identical to the simulation's.
+"""
+
+from __future__ import annotations
+
+import mink
+import mujoco
+import numpy as np
+from mink.lie import SE3, SO3
+
+from pickplace.scene import Scene
+
+
+def build_arm_model(scene: Scene) -> mujoco.MjModel:
+    """Compile the scene with only the arm joints left (nq = nv = 7)."""
+    spec = mujoco.MjSpec.from_file(str(scene.path))
+    for collection in (
+        "actuators",
+        "tendons",
+        "equalities",
+        "sensors",
+        "keys",
+        "pairs",
+        "excludes",
+    ):
+        for element in list(getattr(spec, collection)):
+            spec.delete(element)
+    keep = set(scene.names.arm_joints)
+    for joint in list(spec.joints):
+        if joint.name not in keep:
+            spec.delete(joint)
+    model = spec.compile()
+    # Joint order must match the scene's arm joint order.
+    order = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(model.njnt)]
+    if tuple(order) != scene.names.arm_joints:
+        raise ValueError(f"arm joints in unexpected order {order}")
+    return model
+
+
+class ArmKinematics:
+    """Tool-site forward kinematics and Jacobian of the arm.
+
+    Args:
+        scene: The loaded scene.
+        model: Arm-only model; built with :func:`build_arm_model` if omitted.
+    """
+
+    def __init__(self, scene: Scene, model: mujoco.MjModel | None = None) -> None:
+        self.model = model if model is not None else build_arm_model(scene)
+        self.configuration = mink.Configuration(self.model, q=scene.q_home.copy())
+        self.data = self.configuration.data
+        self.tool_site = scene.names.tool_site
+        self.tool_site_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, self.tool_site)
+        self._jacp = np.zeros((3, self.model.nv))
+        self._jacr = np.zeros((3, self.model.nv))
+
+    @property
+    def q(self) -> np.ndarray:
+        """Joint positions currently loaded [rad]."""
+        return self.configuration.q
+
+    def update(self, q: np.ndarray) -> None:
+        """Load joint positions ``q`` [rad] and run forward kinematics."""
+        self.configuration.update(q)
+
+    def X_WG(self) -> SE3:
+        """Pose of the tool site G in world at the loaded q."""
+        R = self.data.site_xmat[self.tool_site_id].reshape(3, 3)
+        return SE3.from_rotation_and_translation(
+            SO3.from_matrix(R), self.data.site_xpos[self.tool_site_id].copy()
+        )
+
+    def p_WG(self) -> np.ndarray:
+        """Position of the tool site in world [m] at the loaded q."""
+        return self.data.site_xpos[self.tool_site_id].copy()
+
+    def R_WG(self) -> np.ndarray:
+        """Rotation matrix of the tool site in world at the loaded q."""
+        return self.data.site_xmat[self.tool_site_id].reshape(3, 3).copy()
+
+    def J_WG(self) -> np.ndarray:
+        """Spatial Jacobian (6, 7) of the tool site at the loaded q.
+
+        Rows are [v; ω]: the velocity of the tool-site origin [m/s] and the angular velocity
+        [rad/s], both expressed in world, per unit joint velocity [rad/s].
+        """
+        mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self.tool_site_id)
+        return np.vstack([self._jacp, self._jacr])
+
+
+def pose_error_W(X_WG: SE3, X_WG_target: SE3) -> np.ndarray:
+    """Error (6,) from ``X_WG`` to ``X_WG_target``: [p_target - p; log(R_target R^T)] in world.
+
+    The angular part is the world-frame rotation vector [rad] that takes R_WG onto R_WG_target.
+    """
+    dp = X_WG_target.translation() - X_WG.translation()
+    dR = X_WG_target.rotation() @ X_WG.rotation().inverse()
+    return np.concatenate([dp, dR.log()])
