@@ -1,0 +1,118 @@
+"""Faults that scenarios inject to check that every failure gets its right verdict.
+
+Each fault acts on the running :class:`~pickplace.sim.Simulation` at a chosen tick and returns a
+text for the event log when it acts. None of them touches the verdict logic: they change the
+world, and the loop must notice.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from pickplace.scene import Scene
+
+if TYPE_CHECKING:
+    from pickplace.sim import Simulation
+
+
+class GripperDisabled:
+    """The gripper actuator produces no force: the fingers never close."""
+
+    name = "gripper-disabled"
+
+    def __init__(self, scene: Scene) -> None:
+        self.actuator = scene.gripper_actuator_id
+
+    def apply(self, run: Simulation, tick: int) -> str | None:
+        if tick != 0:
+            return None
+        run.model.actuator_gainprm[self.actuator, :] = 0.0
+        run.model.actuator_biasprm[self.actuator, :] = 0.0
+        return "gripper actuator gain set to 0"
+
+
+class BrickMoved:
+    """After the plan was made, the brick is pushed 8 cm along world x, out of the fingers' way.
+
+    8 cm exceeds half the brick's length (3.75 cm) plus a finger's half-width (1 cm), so the
+    fingers close beside it.
+    """
+
+    name = "brick-moved"
+    OFFSET_W = np.array([0.08, 0.0, 0.0])
+
+    def __init__(self, scene: Scene) -> None:
+        self.adr = scene.brick_qpos_adr
+
+    def apply(self, run: Simulation, tick: int) -> str | None:
+        if tick != 0:
+            return None
+        run.data.qpos[self.adr : self.adr + 3] += self.OFFSET_W
+        mujoco.mj_forward(run.model, run.data)
+        return "brick moved by 0.08 m along x after planning"
+
+
+class HeavyBrick:
+    """The brick weighs 30 kg: 294 N of weight against 2 pads × 40 N × μ 1 = 80 N of friction."""
+
+    name = "heavy-brick"
+    MASS = 30.0
+
+    def __init__(self, scene: Scene) -> None:
+        self.body = scene.brick_body_id
+
+    def apply(self, run: Simulation, tick: int) -> str | None:
+        if tick != 0:
+            return None
+        m = run.model
+        scale = self.MASS / m.body_mass[self.body]
+        m.body_mass[self.body] *= scale
+        m.body_inertia[self.body] *= scale
+        mujoco.mj_setConst(m, run.data)
+        return f"brick mass set to {self.MASS:.0f} kg"
+
+
+class Knock:
+    """A 300 N downward blow on the brick for 0.02 s while it is carried.
+
+    It lands halfway through the move from lift to the clearance via-point; 300 N far exceeds
+    the 80 N that friction at the pads can hold.
+    """
+
+    name = "knock"
+    FORCE_W = np.array([0.0, 0.0, -300.0])
+    DURATION = 0.02
+
+    def __init__(self, scene: Scene) -> None:
+        self.body = scene.brick_body_id
+        self._t_hit: float | None = None
+
+    def apply(self, run: Simulation, tick: int) -> str | None:
+        if self._t_hit is None:
+            times = {k.name: k.t for k in run.task.trajectory.keyframes}
+            self._t_hit = 0.5 * (times["lift"] + times["clearance"])
+        t = tick * run.dt
+        active = self._t_hit <= t < self._t_hit + self.DURATION
+        run.data.xfrc_applied[self.body, :3] = self.FORCE_W if active else 0.0
+        if active and t - run.dt < self._t_hit:
+            return f"{-self.FORCE_W[2]:.0f} N downward blow on the brick for {self.DURATION} s"
+        return None
+
+
+class InjectNaN:
+    """A NaN written into the brick's velocity at t = 1 s (a corrupted state)."""
+
+    name = "nan"
+    TIME = 1.0
+
+    def __init__(self, scene: Scene) -> None:
+        self.dof = scene.brick_dof_adr
+
+    def apply(self, run: Simulation, tick: int) -> str | None:
+        if tick != round(self.TIME / run.dt):
+            return None
+        run.data.qvel[self.dof] = np.nan
+        return "NaN written into the brick's velocity"
