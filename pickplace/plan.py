@@ -1,0 +1,319 @@
+"""Keyframes of a gripper motion and their timing under speed and acceleration limits.
+
+Each segment between consecutive keyframes gets the shortest duration for which the motion
+profile (see :mod:`pickplace.trajectory`) respects the linear and angular speed and
+acceleration limits of :class:`PlanConfig`; the gripper stops at every keyframe.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+
+import numpy as np
+import numpy.typing as npt
+from mink.lie import SE3, SO3
+
+from pickplace.errors import InvalidInputError, PlanError, require_finite, require_positive
+from pickplace.grasp import choose_grasp, choose_place_pose, wrap_angle
+from pickplace.trajectory import (
+    MotionProfile,
+    profile_by_name,
+    require_pose,
+    rotation_angle,
+    slerp,
+)
+
+
+def _finite(name: str, value: float) -> float:
+    try:
+        return require_finite(name, value)
+    except (InvalidInputError, TypeError, ValueError) as exc:
+        raise PlanError(f"{name} must be a finite number, got {value!r}") from exc
+
+
+def _positive(name: str, value: float) -> float:
+    try:
+        return require_positive(name, value)
+    except (InvalidInputError, TypeError, ValueError) as exc:
+        raise PlanError(f"{name} must be a finite number > 0, got {value!r}") from exc
+
+
+def _non_negative(name: str, value: float) -> float:
+    v = _finite(name, value)
+    if v < 0.0:
+        raise PlanError(f"{name} must be >= 0, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """A pose the tool site passes through (at rest) at a given time.
+
+    Attributes:
+        name: Label used in logs, e.g. ``"pick"``.
+        t: Time [s].
+        X_WG: Pose of the tool site G in world (unit quaternion, copied on construction).
+        gripper_width: Commanded finger gap at this keyframe [m].
+    """
+
+    name: str
+    t: float
+    X_WG: SE3
+    gripper_width: float
+
+    def __post_init__(self) -> None:
+        """Validate and normalise the fields; raise PlanError naming the bad field."""
+        if not isinstance(self.name, str) or not self.name:
+            raise PlanError(f"keyframe name must be a non-empty string, got {self.name!r}")
+        label = f"keyframe '{self.name}'"
+        object.__setattr__(self, "t", _finite(f"{label} time t [s]", self.t))
+        require_pose(f"{label} X_WG", self.X_WG)
+        object.__setattr__(
+            self, "X_WG", SE3(wxyz_xyz=np.array(self.X_WG.wxyz_xyz, dtype=np.float64))
+        )
+        width = _non_negative(f"{label} gripper_width [m]", self.gripper_width)
+        object.__setattr__(self, "gripper_width", width)
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    """Limits and parameters of pick-and-place planning.
+
+    Attributes:
+        max_linear_speed: Maximum linear speed of G's origin [m/s].
+        max_angular_speed: Maximum angular speed of G [rad/s].
+        max_linear_accel: Maximum linear acceleration [m/s²].
+        max_angular_accel: Maximum angular acceleration [rad/s²].
+        approach_distance: Offset of pre-pick, pre-place and retreat from the grasp, backwards
+            along the approach axis (G's -z, world up for a top grasp) [m].
+        lift_height: Height the brick is lifted straight up after closing [m].
+        close_time: Duration of closing the gripper, at rest [s].
+        open_time: Duration of opening the gripper, at rest [s].
+        settle_time: Rest at the pick pose before closing [s]; 0 omits the "settle" keyframe.
+        open_width: Commanded finger gap when open [m].
+        closed_width: Commanded finger gap when closed [m]; the brick stops the fingers.
+        min_segment_duration: Lower bound of every segment duration [s].
+        profile: Motion profile name: "sine", "minimum-jerk" or "linear" (tests only).
+    """
+
+    max_linear_speed: float = 0.25
+    max_angular_speed: float = 1.0
+    max_linear_accel: float = 0.5
+    max_angular_accel: float = 2.0
+    approach_distance: float = 0.10
+    lift_height: float = 0.15
+    close_time: float = 0.6
+    open_time: float = 0.5
+    settle_time: float = 0.2
+    open_width: float = 0.10
+    closed_width: float = 0.0
+    min_segment_duration: float = 0.05
+    profile: str = "sine"
+
+    def __post_init__(self) -> None:
+        """Validate every field; raise PlanError (UnknownNameError for ``profile``)."""
+        for f in fields(self):
+            if f.name == "profile":
+                continue
+            value = getattr(self, f.name)
+            if f.name in ("settle_time", "closed_width"):
+                checked = _non_negative(f.name, value)
+            else:
+                checked = _positive(f.name, value)
+            object.__setattr__(self, f.name, checked)
+        if self.open_width <= self.closed_width:
+            raise PlanError(
+                f"open_width={self.open_width!r} m must be greater than "
+                f"closed_width={self.closed_width!r} m"
+            )
+        profile_by_name(self.profile)
+
+    @property
+    def motion_profile(self) -> MotionProfile:
+        """The motion profile named by ``profile``."""
+        return profile_by_name(self.profile)
+
+
+DEFAULT_PLAN_CONFIG = PlanConfig()
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """An untimed keyframe: input of :func:`time_keyframes`.
+
+    Attributes:
+        name: Keyframe name.
+        X_WG: Pose of the tool site in world.
+        gripper_width: Commanded finger gap [m].
+        min_duration: Lower bound of the duration of the segment that ends here [s]
+            (e.g. the closing time of an in-place gripper action); ignored for the first.
+    """
+
+    name: str
+    X_WG: SE3
+    gripper_width: float
+    min_duration: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Validate ``min_duration``; the other fields are checked by Keyframe."""
+        label = f"waypoint '{self.name}' min_duration [s]"
+        object.__setattr__(self, "min_duration", _non_negative(label, self.min_duration))
+
+
+def segment_duration(X_a: SE3, X_b: SE3, config: PlanConfig = DEFAULT_PLAN_CONFIG) -> float:
+    """Shortest duration of a motion from ``X_a`` to ``X_b`` within the limits [s].
+
+    The distance ``d = |p_b - p_a|`` [m] and angle ``θ`` of ``R_a⁻¹ R_b`` [rad] are timed
+    separately with the profile's peak-speed and peak-acceleration factors; the result is the
+    largest of both and ``config.min_segment_duration``.
+    """
+    profile = config.motion_profile
+    d = float(np.linalg.norm(X_b.translation() - X_a.translation()))
+    theta = rotation_angle(X_a.rotation(), X_b.rotation())
+    return max(
+        profile.min_duration(d, config.max_linear_speed, config.max_linear_accel),
+        profile.min_duration(theta, config.max_angular_speed, config.max_angular_accel),
+        config.min_segment_duration,
+    )
+
+
+def time_keyframes(
+    waypoints: Sequence[Waypoint], config: PlanConfig = DEFAULT_PLAN_CONFIG
+) -> list[Keyframe]:
+    """Give waypoints times: the first at 0 s, each next one a segment duration later.
+
+    The segment ending at waypoint ``k`` lasts
+    ``max(segment_duration(X_{k-1}, X_k, config), waypoints[k].min_duration)``.
+
+    Raises:
+        PlanError: Fewer than 2 waypoints or an invalid waypoint.
+    """
+    if len(waypoints) < 2:
+        raise PlanError(f"waypoints must contain at least 2 entries, got {len(waypoints)}")
+    for w in waypoints:
+        require_pose(f"waypoint '{w.name}' X_WG", w.X_WG)
+    t = 0.0
+    keyframes = [Keyframe(waypoints[0].name, t, waypoints[0].X_WG, waypoints[0].gripper_width)]
+    for prev, w in itertools.pairwise(waypoints):
+        t += max(segment_duration(prev.X_WG, w.X_WG, config), w.min_duration)
+        keyframes.append(Keyframe(w.name, t, w.X_WG, w.gripper_width))
+    return keyframes
+
+
+def _backed_off(X_WG: SE3, distance: float) -> SE3:
+    """``X_WG`` moved by ``distance`` [m] backwards along G's approach axis (-z_G)."""
+    z_G = X_WG.rotation().apply(np.array([0.0, 0.0, 1.0]))
+    return SE3.from_rotation_and_translation(X_WG.rotation(), X_WG.translation() - distance * z_G)
+
+
+def _raised(X_WG: SE3, height: float) -> SE3:
+    """``X_WG`` moved up by ``height`` [m] along world z."""
+    return SE3.from_rotation_and_translation(
+        X_WG.rotation(), X_WG.translation() + np.array([0.0, 0.0, height])
+    )
+
+
+def _swung(X_WG: SE3, p_W_to: np.ndarray, p_W_base: np.ndarray | None) -> SE3:
+    """``X_WG`` rotated about the vertical base axis until it faces ``p_W_to``.
+
+    The result is the tool pose the arm would carry along if only its base joint turned, the
+    yaw reference for choosing among symmetric grasps. Without a base, ``X_WG`` itself.
+    """
+    if p_W_base is None:
+        return X_WG
+    a = X_WG.translation()[:2] - p_W_base[:2]
+    b = np.asarray(p_W_to)[:2] - p_W_base[:2]
+    swing = wrap_angle(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]))
+    return SE3.from_rotation(SO3.from_z_radians(swing)) @ X_WG
+
+
+def make_pick_place_keyframes(
+    X_WG_initial: SE3,
+    X_WO_pick: SE3,
+    X_WO_place: SE3,
+    clearance_z: float,
+    config: PlanConfig = DEFAULT_PLAN_CONFIG,
+    grasp_height: float = 0.0,
+    p_W_base: npt.ArrayLike | None = None,
+) -> list[Keyframe]:
+    """Timed keyframes that pick the brick at ``X_WO_pick`` and place it at ``X_WO_place``.
+
+    Keyframes, in order: ``initial``, ``pre-pick`` (pick backed off by ``approach_distance``
+    along the approach axis, i.e. up), ``pick``, ``settle`` (same pose, ``settle_time`` later;
+    omitted if ``settle_time`` is 0), ``grip-closed`` (same pose, ``close_time`` later),
+    ``lift`` (pick raised by ``lift_height``), ``clearance`` (xy midway between lift and
+    pre-place, z = ``clearance_z``, orientation halfway by slerp), ``pre-place``, ``place``,
+    ``release`` (same pose, ``open_time`` later) and ``retreat`` (place backed off by
+    ``approach_distance``). Widths are open up to ``settle``, closed from ``grip-closed`` to
+    ``place``, open at ``release`` and ``retreat``; the gripper closes across the
+    settle → grip-closed segment and opens across place → release.
+
+    Args:
+        X_WG_initial: Current tool pose; also picks which symmetric grasp to use.
+        X_WO_pick: Pose of the brick to pick, in world.
+        X_WO_place: Goal pose of the brick, in world.
+        clearance_z: Absolute world height of the transfer via-point [m].
+        config: Limits and parameters.
+        grasp_height: Height of G above the brick centre along the brick's z [m].
+        p_W_base: Position of the arm's base axis in world [m]. When given, the transfer
+            follows the base's swing: the clearance via-point lies at the mean azimuth and
+            mean radius of lift and pre-place around the base (not on the chord, which passes
+            close to the base and folds the elbow), and the grasp and place yaws are chosen
+            relative to the tool yaw carried along by the base rotation, so the wrist does not
+            wind up.
+
+    Raises:
+        PlanError: Invalid input.
+    """
+    require_pose("X_WG_initial", X_WG_initial)
+    require_pose("X_WO_pick", X_WO_pick)
+    require_pose("X_WO_place", X_WO_place)
+    clearance_z = _finite("clearance_z [m]", clearance_z)
+
+    base = None if p_W_base is None else np.asarray(p_W_base, dtype=np.float64)
+    X_OG = choose_grasp(
+        X_WO_pick, _swung(X_WG_initial, X_WO_pick.translation(), base), grasp_height
+    )
+    X_WG_pick = X_WO_pick @ X_OG
+    X_WG_place = choose_place_pose(
+        X_WO_place, X_OG, _swung(X_WG_pick, X_WO_place.translation(), base)
+    )
+    X_WG_lift = _raised(X_WG_pick, config.lift_height)
+    X_WG_pre_place = _backed_off(X_WG_place, config.approach_distance)
+    p_lift, p_pre_place = X_WG_lift.translation(), X_WG_pre_place.translation()
+    if base is None:
+        p_clearance = 0.5 * (p_lift + p_pre_place)
+    else:
+        a, b = p_lift[:2] - base[:2], p_pre_place[:2] - base[:2]
+        azimuth_a = math.atan2(a[1], a[0])
+        azimuth = azimuth_a + 0.5 * wrap_angle(math.atan2(b[1], b[0]) - azimuth_a)
+        radius = 0.5 * (float(np.hypot(*a)) + float(np.hypot(*b)))
+        p_clearance = np.array(
+            [base[0] + radius * math.cos(azimuth), base[1] + radius * math.sin(azimuth), 0.0]
+        )
+    p_clearance[2] = clearance_z
+    X_WG_clearance = SE3.from_rotation_and_translation(
+        slerp(X_WG_lift.rotation(), X_WG_pre_place.rotation(), 0.5), p_clearance
+    )
+
+    w_open, w_closed = config.open_width, config.closed_width
+    waypoints = [
+        Waypoint("initial", X_WG_initial, w_open),
+        Waypoint("pre-pick", _backed_off(X_WG_pick, config.approach_distance), w_open),
+        Waypoint("pick", X_WG_pick, w_open),
+    ]
+    if config.settle_time > 0.0:
+        waypoints.append(Waypoint("settle", X_WG_pick, w_open, config.settle_time))
+    waypoints += [
+        Waypoint("grip-closed", X_WG_pick, w_closed, config.close_time),
+        Waypoint("lift", X_WG_lift, w_closed),
+        Waypoint("clearance", X_WG_clearance, w_closed),
+        Waypoint("pre-place", X_WG_pre_place, w_closed),
+        Waypoint("place", X_WG_place, w_closed),
+        Waypoint("release", X_WG_place, w_open, config.open_time),
+        Waypoint("retreat", _backed_off(X_WG_place, config.approach_distance), w_open),
+    ]
+    return time_keyframes(waypoints, config)

@@ -1,0 +1,376 @@
+"""Motion profiles and the time-parameterised gripper pose trajectory through keyframes.
+
+Segment ``i`` runs from keyframe ``i`` to keyframe ``i + 1``. With ``τ = (t - t_i) / T_i``
+and a motion profile ``s(τ)`` (``s(0) = 0``, ``s(1) = 1``):
+
+* position moves on the straight line ``p_WG = p_i + s(τ) (p_{i+1} - p_i)``;
+* orientation follows the shortest-arc slerp ``R_WG = R_i · exp(s(τ) · φ_i)`` with
+  ``φ_i = log(R_i⁻¹ R_{i+1})`` (angle in [0, π]).
+
+The sine and minimum-jerk profiles have ``s'(0) = s'(1) = 0``, so the gripper stops at every
+keyframe and its velocity is continuous. Spatial velocities are ``V_WG = [v_W; ω_W]``: linear
+velocity of G's origin then angular velocity, both expressed in world (mink's tangent order).
+"""
+
+from __future__ import annotations
+
+import bisect
+import itertools
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+from mink.lie import SE3, SO3
+
+from pickplace.errors import PlanError, UnknownNameError
+
+if TYPE_CHECKING:
+    from pickplace.plan import Keyframe
+
+FloatArray = npt.NDArray[np.float64]
+
+QUATERNION_NORM_TOL = 1e-9
+"""Largest accepted deviation of a keyframe quaternion norm from 1 [-]."""
+
+
+# --------------------------------------------------------------------------- profiles
+
+
+class MotionProfile(ABC):
+    """Time scaling ``s(τ)`` of a segment, with ``τ ∈ [0, 1]``, ``s(0) = 0`` and ``s(1) = 1``.
+
+    For a segment of length ``d`` (metres or radians) and duration ``T`` the peak speed is
+    ``peak_speed_factor · d / T`` and the peak acceleration ``peak_accel_factor · d / T²``.
+    These two factors are the single source of truth for segment timing.
+    """
+
+    name: ClassVar[str]
+    peak_speed_factor: ClassVar[float]
+    """Maximum of ``ds/dτ`` over ``[0, 1]`` [-]."""
+    peak_accel_factor: ClassVar[float]
+    """Maximum of ``|d²s/dτ²|`` over ``[0, 1]`` [-]; ``math.inf`` if unbounded."""
+
+    @abstractmethod
+    def s(self, tau: float) -> float:
+        """Path parameter at normalised time ``tau`` ∈ [0, 1] [-]."""
+
+    @abstractmethod
+    def ds(self, tau: float) -> float:
+        """Derivative ``ds/dτ`` at normalised time ``tau`` ∈ [0, 1] [-]."""
+
+    def min_duration(self, distance: float, max_speed: float, max_accel: float) -> float:
+        """Shortest segment duration that respects a speed and an acceleration limit.
+
+        Args:
+            distance: Length of the segment [m] or rotation angle [rad]; ≥ 0.
+            max_speed: Speed limit [m/s] or [rad/s]; > 0.
+            max_accel: Acceleration limit [m/s²] or [rad/s²]; > 0. Ignored when the
+                profile's acceleration is unbounded (``peak_accel_factor`` infinite).
+
+        Returns:
+            ``max(c_v d / v_max, sqrt(c_a d / a_max))`` [s] (0 for a zero distance).
+        """
+        t_speed = self.peak_speed_factor * distance / max_speed
+        if math.isinf(self.peak_accel_factor):
+            return t_speed
+        return max(t_speed, math.sqrt(self.peak_accel_factor * distance / max_accel))
+
+
+@dataclass(frozen=True)
+class SineProfile(MotionProfile):
+    """``s(τ) = (1 - cos πτ) / 2``: peak speed ``π d / (2T)``, peak accel ``π² d / (2T²)``."""
+
+    name: ClassVar[str] = "sine"
+    peak_speed_factor: ClassVar[float] = math.pi / 2.0
+    peak_accel_factor: ClassVar[float] = math.pi**2 / 2.0
+
+    def s(self, tau: float) -> float:
+        """Path parameter at normalised time ``tau`` [-]."""
+        return 0.5 * (1.0 - math.cos(math.pi * tau))
+
+    def ds(self, tau: float) -> float:
+        """Derivative ``ds/dτ`` at normalised time ``tau`` [-]."""
+        return 0.5 * math.pi * math.sin(math.pi * tau)
+
+
+@dataclass(frozen=True)
+class MinimumJerkProfile(MotionProfile):
+    """``s(τ) = 10τ³ - 15τ⁴ + 6τ⁵``: peak speed ``1.875 d / T``, peak accel ``5.7735 d / T²``."""
+
+    name: ClassVar[str] = "minimum-jerk"
+    peak_speed_factor: ClassVar[float] = 1.875
+    peak_accel_factor: ClassVar[float] = 10.0 / math.sqrt(3.0)
+
+    def s(self, tau: float) -> float:
+        """Path parameter at normalised time ``tau`` [-]."""
+        return tau**3 * (10.0 + tau * (-15.0 + 6.0 * tau))
+
+    def ds(self, tau: float) -> float:
+        """Derivative ``ds/dτ`` at normalised time ``tau`` [-]."""
+        return 30.0 * tau**2 * (1.0 - tau) ** 2
+
+
+@dataclass(frozen=True)
+class LinearProfile(MotionProfile):
+    """``s(τ) = τ``: constant speed ``d / T``, unbounded acceleration at the ends (tests only)."""
+
+    name: ClassVar[str] = "linear"
+    peak_speed_factor: ClassVar[float] = 1.0
+    peak_accel_factor: ClassVar[float] = math.inf
+
+    def s(self, tau: float) -> float:
+        """Path parameter at normalised time ``tau`` [-]."""
+        return tau
+
+    def ds(self, tau: float) -> float:
+        """Derivative ``ds/dτ`` at normalised time ``tau`` [-]."""
+        return 1.0
+
+
+PROFILES: dict[str, MotionProfile] = {
+    p.name: p for p in (SineProfile(), MinimumJerkProfile(), LinearProfile())
+}
+
+
+def profile_by_name(name: str) -> MotionProfile:
+    """Return the motion profile called ``name``.
+
+    Raises:
+        UnknownNameError: ``name`` is not one of ``PROFILES``.
+    """
+    try:
+        return PROFILES[name]
+    except (KeyError, TypeError):
+        raise UnknownNameError("profile", str(name), PROFILES) from None
+
+
+# ---------------------------------------------------------------- rotations and checks
+
+
+def rotation_log(R: SO3) -> FloatArray:
+    """Axis-angle vector of ``R`` along the shortest arc (angle in [0, π]) [rad].
+
+    Same as mink's ``SO3.log`` (which also flips the quaternion sign when ``w < 0``) except in
+    two cases where mink returns zero: a rotation by exactly π (``w == 0``, since
+    ``sign(0) == 0``) and rotations smaller than about 2e-10 rad (its epsilon cut-off). Here
+    ``2·atan2(|v|, |w|)·v/|v|`` is used, which is accurate at every angle.
+    """
+    w = float(R.wxyz[0])
+    v = np.array(R.wxyz[1:], dtype=np.float64)
+    if w < 0.0:
+        w, v = -w, -v
+    norm = float(np.linalg.norm(v))
+    if norm == 0.0:
+        return np.zeros(3, dtype=np.float64)
+    return np.asarray((2.0 * math.atan2(norm, w) / norm) * v, dtype=np.float64)
+
+
+def rotation_angle(R_a: SO3, R_b: SO3) -> float:
+    """Angle of the relative rotation ``R_a⁻¹ R_b``, in [0, π] [rad]."""
+    return float(np.linalg.norm(rotation_log(R_a.inverse() @ R_b)))
+
+
+def slerp(R_a: SO3, R_b: SO3, alpha: float) -> SO3:
+    """Shortest-arc spherical interpolation ``R_a · exp(alpha · log(R_a⁻¹ R_b))``.
+
+    Args:
+        R_a: Rotation at ``alpha = 0``.
+        R_b: Rotation at ``alpha = 1``.
+        alpha: Interpolation fraction [-], normally in [0, 1].
+    """
+    return R_a @ SO3.exp(alpha * rotation_log(R_a.inverse() @ R_b))
+
+
+def require_pose(name: str, X: SE3) -> None:
+    """Raise PlanError unless ``X`` is an SE3 with finite values and a unit quaternion.
+
+    Args:
+        name: How to call the pose in the error message (e.g. ``"X_WO_pick"``).
+        X: Pose to check.
+    """
+    if not isinstance(X, SE3):
+        raise PlanError(f"{name} must be a mink.lie.SE3, got {type(X).__name__}")
+    if not np.all(np.isfinite(X.wxyz_xyz)):
+        raise PlanError(f"{name} must be finite, got wxyz_xyz={X.wxyz_xyz.tolist()}")
+    norm = float(np.linalg.norm(X.wxyz_xyz[:4]))
+    if abs(norm - 1.0) > QUATERNION_NORM_TOL:
+        raise PlanError(
+            f"{name} quaternion norm {norm!r} must be 1 (within {QUATERNION_NORM_TOL:g})"
+        )
+
+
+def validate_keyframes(keyframes: Sequence[Keyframe]) -> None:
+    """Check that keyframes can define a trajectory.
+
+    Requires at least 2 keyframes, finite strictly increasing times, finite poses with unit
+    quaternions and finite non-negative gripper widths.
+
+    Raises:
+        PlanError: Naming the offending keyframe and field.
+    """
+    if len(keyframes) < 2:
+        raise PlanError(f"keyframes must contain at least 2 entries, got {len(keyframes)}")
+    previous: Keyframe | None = None
+    for k in keyframes:
+        if not math.isfinite(k.t):
+            raise PlanError(f"keyframe '{k.name}' time t={k.t!r} s must be finite")
+        require_pose(f"keyframe '{k.name}' X_WG", k.X_WG)
+        if not (math.isfinite(k.gripper_width) and k.gripper_width >= 0.0):
+            raise PlanError(
+                f"keyframe '{k.name}' gripper_width={k.gripper_width!r} m must be finite and >= 0"
+            )
+        if previous is not None and not k.t > previous.t:
+            raise PlanError(
+                f"keyframe '{k.name}' time t={k.t!r} s must be greater than the previous "
+                f"keyframe '{previous.name}' t={previous.t!r} s (times strictly increasing)"
+            )
+        previous = k
+
+
+# ------------------------------------------------------------------------- trajectory
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """Precomputed data of one segment (world-frame quantities)."""
+
+    t0: float
+    inv_duration: float
+    p0: FloatArray
+    dp: FloatArray
+    R0: SO3
+    phi: FloatArray
+    omega_dir_W: FloatArray
+    width0: float
+    dwidth: float
+
+
+class PoseTrajectory:
+    """Gripper pose ``X_WG(t)``, spatial velocity and gripper width through keyframes.
+
+    Times before the first keyframe or after the last one clamp to the ends (velocity zero).
+    """
+
+    def __init__(
+        self, keyframes: Sequence[Keyframe], profile: MotionProfile | str = "sine"
+    ) -> None:
+        """Build the trajectory and precompute per-segment data.
+
+        Args:
+            keyframes: At least 2 keyframes with strictly increasing times [s].
+            profile: Motion profile, or its name (see ``PROFILES``).
+
+        Raises:
+            PlanError: Invalid keyframes.
+            UnknownNameError: Unknown profile name.
+        """
+        validate_keyframes(keyframes)
+        self._profile = profile_by_name(profile) if isinstance(profile, str) else profile
+        self._keyframes = tuple(keyframes)
+        self._times = [float(k.t) for k in keyframes]
+        self._segments: list[_Segment] = []
+        for a, b in itertools.pairwise(self._keyframes):
+            R0 = a.X_WG.rotation()
+            phi = rotation_log(R0.inverse() @ b.X_WG.rotation())
+            p0 = np.array(a.X_WG.translation(), dtype=np.float64)
+            self._segments.append(
+                _Segment(
+                    t0=float(a.t),
+                    inv_duration=1.0 / (float(b.t) - float(a.t)),
+                    p0=p0,
+                    dp=np.asarray(b.X_WG.translation(), dtype=np.float64) - p0,
+                    R0=R0,
+                    phi=phi,
+                    omega_dir_W=np.asarray(R0.apply(phi), dtype=np.float64),
+                    width0=float(a.gripper_width),
+                    dwidth=float(b.gripper_width) - float(a.gripper_width),
+                )
+            )
+
+    @property
+    def keyframes(self) -> tuple[Keyframe, ...]:
+        """The keyframes, in time order."""
+        return self._keyframes
+
+    @property
+    def profile(self) -> MotionProfile:
+        """The motion profile of every segment."""
+        return self._profile
+
+    @property
+    def start_time(self) -> float:
+        """Time of the first keyframe [s]."""
+        return self._times[0]
+
+    @property
+    def end_time(self) -> float:
+        """Time of the last keyframe [s]."""
+        return self._times[-1]
+
+    @property
+    def duration(self) -> float:
+        """Total duration ``end_time - start_time`` [s]."""
+        return self._times[-1] - self._times[0]
+
+    def segment_index(self, t: float) -> int:
+        """Index ``i`` of the segment (keyframe ``i`` → ``i + 1``) active at time ``t`` [s].
+
+        A knot time belongs to the segment that starts there; times are clamped.
+        """
+        i = bisect.bisect_right(self._times, t) - 1
+        return min(max(i, 0), len(self._segments) - 1)
+
+    def active_keyframe(self, t: float) -> Keyframe:
+        """Last keyframe reached at time ``t`` [s] (the first one before the start)."""
+        i = bisect.bisect_right(self._times, t) - 1
+        return self._keyframes[max(i, 0)]
+
+    def _locate(self, t: float) -> tuple[_Segment, float]:
+        seg = self._segments[self.segment_index(t)]
+        tau = (t - seg.t0) * seg.inv_duration
+        return seg, min(max(tau, 0.0), 1.0)
+
+    def pose(self, t: float) -> SE3:
+        """Commanded tool pose ``X_WG`` at time ``t`` [s]; exact at keyframe times."""
+        if t >= self._times[-1]:
+            return SE3(wxyz_xyz=np.array(self._keyframes[-1].X_WG.wxyz_xyz, dtype=np.float64))
+        seg, tau = self._locate(t)
+        s = self._profile.s(tau)
+        R_WG = seg.R0 @ SO3.exp(s * seg.phi)
+        return SE3.from_rotation_and_translation(R_WG, seg.p0 + s * seg.dp)
+
+    def spatial_velocity(self, t: float) -> FloatArray:
+        """Spatial velocity ``V_WG = [v_W; ω_W]`` at time ``t`` [s], shape (6,).
+
+        ``v_W`` [m/s] is the velocity of G's origin and ``ω_W`` [rad/s] the angular velocity,
+        both expressed in world. Computed analytically: ``ṡ = s'(τ) / T``, ``v_W = ṡ Δp``,
+        ``ω_W = ṡ R_i φ_i``. Zero at and beyond the first and last keyframe times.
+        """
+        V_WG = np.zeros(6, dtype=np.float64)
+        if t <= self._times[0] or t >= self._times[-1]:
+            return V_WG
+        seg, tau = self._locate(t)
+        s_dot = self._profile.ds(tau) * seg.inv_duration
+        V_WG[:3] = s_dot * seg.dp
+        V_WG[3:] = s_dot * seg.omega_dir_W
+        return V_WG
+
+    def gripper_width(self, t: float) -> float:
+        """Commanded finger gap at time ``t`` [m], a linear ramp across each segment."""
+        seg, tau = self._locate(t)
+        return seg.width0 + tau * seg.dwidth
+
+    def sample_path(self, n: int) -> FloatArray:
+        """Positions ``p_WG`` at ``n`` equally spaced times over the trajectory, shape (n, 3) [m].
+
+        Raises:
+            PlanError: ``n`` is not an integer ≥ 2.
+        """
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 2:
+            raise PlanError(f"n must be an integer >= 2, got {n!r}")
+        times = np.linspace(self._times[0], self._times[-1], int(n))
+        return np.array([self.pose(float(t)).translation() for t in times], dtype=np.float64)

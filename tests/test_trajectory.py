@@ -1,0 +1,313 @@
+"""Facts about motion profiles and PoseTrajectory."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from mink.lie import SE3, SO3
+from scipy.spatial.transform import Rotation, Slerp
+
+from pickplace.errors import PlanError, UnknownNameError
+from pickplace.grasp import brick_pose, top_down_rotation
+from pickplace.plan import Keyframe, PlanConfig, make_pick_place_keyframes
+from pickplace.trajectory import (
+    PROFILES,
+    LinearProfile,
+    MinimumJerkProfile,
+    MotionProfile,
+    PoseTrajectory,
+    SineProfile,
+    profile_by_name,
+    rotation_log,
+    slerp,
+)
+
+
+def quat_angle(q_a: np.ndarray, q_b: np.ndarray) -> float:
+    """Angle of the rotation between two wxyz quaternions, accurate for small angles [rad]."""
+    q = SO3(wxyz=np.asarray(q_a)).inverse() @ SO3(wxyz=np.asarray(q_b))
+    return 2.0 * math.atan2(float(np.linalg.norm(q.wxyz[1:])), abs(float(q.wxyz[0])))
+
+
+def pose(R: SO3, p: tuple[float, float, float]) -> SE3:
+    return SE3.from_rotation_and_translation(R, np.array(p, dtype=np.float64))
+
+
+def pick_place_keyframes(config: PlanConfig) -> list[Keyframe]:
+    X_WG_initial = pose(top_down_rotation(0.4) @ SO3.from_y_radians(0.3), (0.35, 0.05, 0.55))
+    return make_pick_place_keyframes(
+        X_WG_initial,
+        brick_pose(0.55, -0.30, 0.045, 2.5),
+        brick_pose(0.55, 0.30, 0.045, -0.7),
+        clearance_z=0.35,
+        config=config,
+    )
+
+
+def random_keyframes(rng: np.random.Generator, n: int) -> list[Keyframe]:
+    keyframes = []
+    t = 0.0
+    for i in range(n):
+        wxyz = rng.normal(size=4)
+        wxyz /= np.linalg.norm(wxyz)
+        keyframes.append(
+            Keyframe(f"k{i}", t, SE3(np.concatenate([wxyz, rng.uniform(-1, 1, 3)])), 0.05)
+        )
+        t += float(rng.uniform(0.5, 2.0))
+    return keyframes
+
+
+def trajectories() -> list[PoseTrajectory]:
+    rng = np.random.default_rng(7)
+    out = [PoseTrajectory(random_keyframes(rng, 6), name) for name in PROFILES]
+    for name in ("sine", "minimum-jerk"):
+        out.append(PoseTrajectory(pick_place_keyframes(PlanConfig(profile=name)), name))
+    return out
+
+
+TRAJECTORIES = trajectories()
+
+
+@pytest.mark.parametrize("traj", TRAJECTORIES)
+def test_pose_at_keyframe_times_equals_keyframe(traj: PoseTrajectory) -> None:
+    for k in traj.keyframes:
+        X = traj.pose(k.t)
+        assert np.max(np.abs(X.translation() - k.X_WG.translation())) <= 1e-12
+        assert quat_angle(X.rotation().wxyz, k.X_WG.rotation().wxyz) <= 1e-12
+
+
+@pytest.mark.parametrize("traj", TRAJECTORIES)
+def test_orientation_is_unit_quaternion_everywhere(traj: PoseTrajectory) -> None:
+    for t in np.linspace(-0.5, traj.end_time + 0.5, 2001):
+        assert abs(np.linalg.norm(traj.pose(float(t)).rotation().wxyz) - 1.0) <= 1e-12
+
+
+def _sign_flip_endpoints() -> list[tuple[SO3, SO3]]:
+    """Endpoint pairs whose quaternions are in opposite hemispheres (w_a > 0, w_b < 0)."""
+    R_a = SO3.from_rpy_radians(0.1, -0.2, 0.3)
+    pairs = []
+    for angle in (0.4, 2.0, 3.0):
+        R_b = R_a @ SO3.exp(angle * np.array([0.6, 0.0, 0.8]))
+        wxyz = R_b.wxyz if R_b.wxyz[0] < 0 else -R_b.wxyz
+        pairs.append((R_a, SO3(wxyz=np.array(wxyz))))
+    return pairs
+
+
+@pytest.mark.parametrize(("R_a", "R_b"), _sign_flip_endpoints())
+@pytest.mark.parametrize("profile", ["sine", "linear"])
+def test_slerp_never_takes_the_long_way_round(R_a: SO3, R_b: SO3, profile: str) -> None:
+    assert R_a.wxyz[0] > 0 and R_b.wxyz[0] < 0
+    total = quat_angle(R_a.wxyz, R_b.wxyz)
+    traj = PoseTrajectory(
+        [
+            Keyframe("a", 0.0, pose(R_a, (0, 0, 0)), 0.0),
+            Keyframe("b", 2.0, pose(R_b, (0, 0, 0)), 0.0),
+        ],
+        profile,
+    )
+    quats = [traj.pose(float(t)).rotation().wxyz for t in np.linspace(0.0, 2.0, 501)]
+    steps = [quat_angle(q0, q1) for q0, q1 in itertools.pairwise(quats)]
+    assert max(steps) <= total
+    # The path length equals the shortest angle: no detour.
+    assert sum(steps) == pytest.approx(total, abs=1e-9)
+    for q in quats:
+        assert abs(np.linalg.norm(q) - 1.0) <= 1e-12
+        assert quat_angle(R_a.wxyz, q) <= total + 1e-12
+
+
+def test_half_turn_with_zero_w_is_interpolated() -> None:
+    """A rotation by exactly π (w == 0) is where mink's log returns zero; ours does not."""
+    R_b = SO3(wxyz=np.array([0.0, 0.0, 0.6, 0.8]))
+    assert np.linalg.norm(rotation_log(R_b)) == pytest.approx(math.pi, abs=1e-15)
+    mid = slerp(SO3.identity(), R_b, 0.5)
+    assert quat_angle(SO3.identity().wxyz, mid.wxyz) == pytest.approx(math.pi / 2, abs=1e-12)
+    traj = PoseTrajectory(
+        [
+            Keyframe("a", 0.0, SE3.identity(), 0.0),
+            Keyframe("b", 1.0, pose(R_b, (0, 0, 0)), 0.0),
+        ],
+        "linear",
+    )
+    omega = traj.spatial_velocity(0.3)[3:]
+    assert np.linalg.norm(omega) == pytest.approx(math.pi, abs=1e-12)
+
+
+def _world_rotation_log(R_plus: SO3, R_minus: SO3) -> np.ndarray:
+    return rotation_log(R_plus @ R_minus.inverse())
+
+
+@pytest.mark.parametrize("traj", TRAJECTORIES)
+def test_spatial_velocity_matches_central_finite_difference(traj: PoseTrajectory) -> None:
+    rng = np.random.default_rng(1234)
+    h = 1e-6
+    knots = np.array([k.t for k in traj.keyframes])
+    times = rng.uniform(traj.start_time, traj.end_time, 1000)
+    times = times[np.min(np.abs(knots[None, :] - times[:, None]), axis=1) >= 2 * h]
+    assert len(times) >= 990
+    errors = []
+    for t in times:
+        X_plus, X_minus = traj.pose(t + h), traj.pose(t - h)
+        v_fd = (X_plus.translation() - X_minus.translation()) / (2 * h)
+        w_fd = _world_rotation_log(X_plus.rotation(), X_minus.rotation()) / (2 * h)
+        errors.append(traj.spatial_velocity(float(t)) - np.concatenate([v_fd, w_fd]))
+    assert np.max(np.abs(errors)) <= 1e-6
+
+
+@pytest.mark.parametrize("traj", [t for t in TRAJECTORIES if t.profile.name != "linear"])
+def test_spatial_velocity_is_zero_at_keyframes_and_outside(traj: PoseTrajectory) -> None:
+    for k in traj.keyframes:
+        assert np.max(np.abs(traj.spatial_velocity(k.t))) <= 1e-12
+    assert not np.any(traj.spatial_velocity(traj.start_time - 1.0))
+    assert not np.any(traj.spatial_velocity(traj.end_time + 1.0))
+
+
+@pytest.mark.parametrize("profile", ["sine", "minimum-jerk", "linear"])
+def test_planned_velocity_respects_speed_limits(profile: str) -> None:
+    config = PlanConfig(profile=profile)
+    traj = PoseTrajectory(pick_place_keyframes(config), profile)
+    knots = [k.t for k in traj.keyframes]
+    times = list(np.linspace(0.0, traj.end_time, 5001))
+    times += [0.5 * (a + b) for a, b in itertools.pairwise(knots)]  # sine peaks
+    v_max = w_max = 0.0
+    for t in times:
+        V = traj.spatial_velocity(float(t))
+        v_max = max(v_max, float(np.linalg.norm(V[:3])))
+        w_max = max(w_max, float(np.linalg.norm(V[3:])))
+    assert v_max <= config.max_linear_speed * (1 + 1e-9)
+    assert w_max <= config.max_angular_speed * (1 + 1e-9)
+    assert v_max > 0.5 * config.max_linear_speed  # the limits are used, not just respected
+
+
+def test_pure_rotation_with_linear_profile_has_constant_angular_velocity() -> None:
+    R_a = SO3.from_rpy_radians(0.3, 0.2, -1.0)
+    R_b = R_a @ SO3.exp(np.array([0.5, -1.0, 0.7]))
+    traj = PoseTrajectory(
+        [
+            Keyframe("a", 0.0, pose(R_a, (0.1, 0.2, 0.3)), 0.0),
+            Keyframe("b", 1.5, pose(R_b, (0.1, 0.2, 0.3)), 0.0),
+        ],
+        "linear",
+    )
+    omegas = np.array([traj.spatial_velocity(float(t))[3:] for t in np.linspace(0.01, 1.49, 200)])
+    norms = np.linalg.norm(omegas, axis=1)
+    assert np.max(np.abs(norms - norms[0])) <= 1e-12
+    assert np.max(np.abs(omegas / norms[:, None] - omegas[0] / norms[0])) <= 1e-12
+    assert norms[0] == pytest.approx(quat_angle(R_a.wxyz, R_b.wxyz) / 1.5, abs=1e-12)
+    # The constant-rate claim also holds for the finite difference of the poses.
+    h = 1e-4
+    for t in (0.2, 0.7, 1.3):
+        w_fd = _world_rotation_log(traj.pose(t + h).rotation(), traj.pose(t - h).rotation())
+        np.testing.assert_allclose(w_fd / (2 * h), omegas[0], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("profile", list(PROFILES))
+def test_pure_translation_stays_on_the_straight_line(profile: str) -> None:
+    R = SO3.from_rpy_radians(0.5, -0.4, 2.0)
+    p_a, p_b = np.array([0.3, -0.2, 0.4]), np.array([-0.25, 0.6, 0.1])
+    traj = PoseTrajectory(
+        [
+            Keyframe("a", 0.0, pose(R, tuple(p_a)), 0.0),
+            Keyframe("b", 2.0, pose(R, tuple(p_b)), 0.0),
+        ],
+        profile,
+    )
+    u = (p_b - p_a) / np.linalg.norm(p_b - p_a)
+    for p in traj.sample_path(500):
+        assert np.linalg.norm(np.cross(p - p_a, u)) < 1e-12
+        assert -1e-12 <= float(np.dot(p - p_a, u)) <= np.linalg.norm(p_b - p_a) + 1e-12
+
+
+def test_orientation_matches_scipy_slerp_for_linear_profile() -> None:
+    rng = np.random.default_rng(99)
+    keyframes = random_keyframes(rng, 8)
+    traj = PoseTrajectory(keyframes, "linear")
+    times = np.array([k.t for k in keyframes])
+    xyzw = np.array([np.roll(k.X_WG.rotation().wxyz, -1) for k in keyframes])
+    reference = Slerp(times, Rotation.from_quat(xyzw))
+    samples = rng.uniform(times[0], times[-1], 500)
+    expected = reference(samples).as_quat()
+    for t, q_xyzw in zip(samples, expected, strict=True):
+        q_wxyz = np.roll(q_xyzw, 1)
+        assert quat_angle(traj.pose(float(t)).rotation().wxyz, q_wxyz) <= 1e-9
+
+
+def test_gripper_width_ramps_linearly_across_segments() -> None:
+    X = SE3.identity()
+    traj = PoseTrajectory(
+        [Keyframe("a", 0.0, X, 0.10), Keyframe("b", 1.0, X, 0.10), Keyframe("c", 3.0, X, 0.0)]
+    )
+    assert traj.gripper_width(0.5) == 0.10
+    assert traj.gripper_width(2.0) == pytest.approx(0.05, abs=1e-15)
+    assert traj.gripper_width(3.0) == 0.0
+    assert traj.gripper_width(-1.0) == 0.10
+    assert traj.gripper_width(10.0) == 0.0
+
+
+def test_segment_index_active_keyframe_and_clamping() -> None:
+    X_a = SE3.identity()
+    X_b = pose(SO3.identity(), (0.1, 0.0, 0.0))
+    traj = PoseTrajectory(
+        [Keyframe("a", 0.0, X_a, 0.0), Keyframe("b", 1.0, X_b, 0.0), Keyframe("c", 2.5, X_a, 0.0)]
+    )
+    assert traj.duration == 2.5
+    assert [traj.segment_index(t) for t in (-1.0, 0.0, 0.99, 1.0, 2.5, 9.0)] == [0, 0, 0, 1, 1, 1]
+    names = [traj.active_keyframe(t).name for t in (-1.0, 0.0, 0.99, 1.0, 2.49, 2.5, 9.0)]
+    assert names == ["a", "a", "a", "b", "b", "c", "c"]
+    assert traj.pose(-3.0) == X_a
+    assert traj.pose(7.0) == X_a
+    assert traj.sample_path(7).shape == (7, 3)
+
+
+@pytest.mark.parametrize(
+    "profile", [SineProfile(), MinimumJerkProfile(), LinearProfile()], ids=lambda p: p.name
+)
+def test_profile_factors_match_the_curves(profile: MotionProfile) -> None:
+    taus = np.linspace(0.0, 1.0, 200001)
+    ds = np.array([profile.ds(float(t)) for t in taus])
+    s = np.array([profile.s(float(t)) for t in taus])
+    assert profile.s(0.0) == 0.0 and profile.s(1.0) == pytest.approx(1.0, abs=1e-15)
+    np.testing.assert_allclose(np.gradient(s, taus), ds, rtol=0, atol=1e-4)
+    assert ds.max() == pytest.approx(profile.peak_speed_factor, rel=1e-9)
+    dds = np.abs(np.gradient(ds, taus))
+    if math.isfinite(profile.peak_accel_factor):
+        assert dds.max() == pytest.approx(profile.peak_accel_factor, rel=1e-6)
+
+
+def test_profile_by_name() -> None:
+    assert isinstance(profile_by_name("minimum-jerk"), MinimumJerkProfile)
+    with pytest.raises(UnknownNameError, match=r"profile 'cubic'.*linear, minimum-jerk, sine"):
+        profile_by_name("cubic")
+
+
+def _two(t0: float = 0.0, t1: float = 1.0, w1: float = 0.0) -> list[Keyframe]:
+    return [Keyframe("a", t0, SE3.identity(), 0.0), Keyframe("b", t1, SE3.identity(), w1)]
+
+
+def test_invalid_trajectory_inputs_are_rejected() -> None:
+    with pytest.raises(PlanError, match=r"keyframe 'b' time t=0\.5 s must be greater"):
+        PoseTrajectory(_two(1.0, 0.5))
+    with pytest.raises(PlanError, match=r"keyframe 'b' time t=0\.0 s must be greater"):
+        PoseTrajectory(_two(0.0, 0.0))
+    with pytest.raises(PlanError, match="keyframes must contain at least 2"):
+        PoseTrajectory(_two()[:1])
+    with pytest.raises(UnknownNameError, match="unknown profile 'cubic'"):
+        PoseTrajectory(_two(), "cubic")
+    with pytest.raises(PlanError, match="n must be an integer >= 2"):
+        PoseTrajectory(_two()).sample_path(1)
+
+
+def test_invalid_keyframes_are_rejected() -> None:
+    bad_quat = SE3(np.array([1.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    with pytest.raises(PlanError, match=r"keyframe 'x' X_WG quaternion norm .* must be 1"):
+        Keyframe("x", 0.0, bad_quat, 0.0)
+    with pytest.raises(PlanError, match=r"keyframe 'x' gripper_width \[m\] must be >= 0"):
+        Keyframe("x", 0.0, SE3.identity(), -0.01)
+    with pytest.raises(PlanError, match=r"keyframe 'x' time t \[s\] must be a finite"):
+        Keyframe("x", math.nan, SE3.identity(), 0.0)
+    with pytest.raises(PlanError, match="keyframe name must be a non-empty string"):
+        Keyframe("", 0.0, SE3.identity(), 0.0)
+    with pytest.raises(PlanError, match="keyframe 'x' X_WG must be finite"):
+        Keyframe("x", 0.0, SE3(np.array([1.0, 0, 0, 0, math.inf, 0, 0])), 0.0)
