@@ -96,7 +96,7 @@ def pick_place_task(
     X_WO_place = brick_on_floor(scene, goal, dst.floor_top_z)
     clearance_z = max(src.wall_top_z, dst.wall_top_z) + CLEARANCE_ABOVE_WALLS
     keyframes = make_pick_place_keyframes(
-        home_tool_pose(scene), X_WO_pick, X_WO_place, clearance_z, plan
+        home_tool_pose(scene), X_WO_pick, X_WO_place, clearance_z, plan, p_W_base=scene.p_W_base
     )
     return Task(
         scenario=name,

@@ -193,6 +193,7 @@ class Scene:
         source_bin: Bin the brick starts in.
         target_bin: Bin the brick must end in.
         home_key_id: Keyframe with the arm's home posture.
+        p_W_base: Point on the first arm joint's (vertical) axis, in world [m].
         q_home: Arm joint positions of the home keyframe [rad].
     """
 
@@ -222,6 +223,7 @@ class Scene:
     source_bin: BinGeometry
     target_bin: BinGeometry
     home_key_id: int
+    p_W_base: np.ndarray
     q_home: np.ndarray = field(repr=False)
 
     @property
@@ -328,5 +330,6 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         source_bin=_bin_geometry(model, data, names.source_bin),
         target_bin=_bin_geometry(model, data, names.target_bin),
         home_key_id=home,
+        p_W_base=data.xanchor[joint_ids[0]].copy(),
         q_home=data.qpos[qpos_adr].copy(),
     )
