@@ -27,7 +27,7 @@ from mink.lie import SE3, SO3
 
 from pickplace.controllers import IK_STATUSES, DiffIKController, IKStatus
 from pickplace.diagnostics import holding_torques, jacobian_health
-from pickplace.errors import require_positive
+from pickplace.errors import InvalidInputError, require_positive
 from pickplace.scene import Scene
 from pickplace.trajectory import PoseTrajectory
 
@@ -294,9 +294,10 @@ class Simulation:
         steps = self.config.control_rate_hz**-1 / self.model.opt.timestep
         self.substeps = round(steps)
         if self.substeps < 1 or abs(steps - self.substeps) > 1e-9:
-            raise ValueError(
-                f"control rate {self.config.control_rate_hz} Hz is not a whole number of "
-                f"physics steps of {self.model.opt.timestep} s"
+            raise InvalidInputError(
+                f"--control-rate {self.config.control_rate_hz:g} Hz is not a whole number of "
+                f"physics steps of {self.model.opt.timestep:g} s; valid rates divide "
+                f"{1.0 / self.model.opt.timestep:g} Hz (e.g. 100, 125, 250, 500)"
             )
         self.dt = self.substeps * self.model.opt.timestep
         if abs(controller.dt - self.dt) > 1e-12:

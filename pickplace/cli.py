@@ -1,0 +1,267 @@
+"""The ``pickplace`` command: run a scenario, list scenarios, sweep many seeds.
+
+Exit codes: 0 success, 1 task failed, 2 bad input (one line on stderr, no traceback),
+130 interrupted (Ctrl-C; a recording in progress is flushed and readable).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from pickplace.errors import PickPlaceError
+from pickplace.scenarios import SCENARIOS, BrickPlacement
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error as one line and exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text, 10)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text, 10)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
+    return value
+
+
+def _finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got '{text}'") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got '{text}'")
+    return value
+
+
+def _brick(text: str) -> BrickPlacement:
+    parts = text.split(",")
+    usage = "must be X,Y,YAW: three finite numbers in metres and radians, e.g. 0.05,-0.55,0.3"
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"{usage}; got '{text}'")
+    try:
+        x, y, yaw = (float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{usage}; got '{text}'") from None
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise argparse.ArgumentTypeError(f"{usage}; got '{text}'")
+    return BrickPlacement(x, y, yaw)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pickplace``."""
+    parser = _Parser(prog="pickplace", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    run = sub.add_parser("run", help="simulate one scenario")
+    run.add_argument("--scene", type=Path, help="MJCF scene file (default: scenes/scene.xml)")
+    run.add_argument("--scenario", default="pick-place", help="scenario name (pickplace scenarios)")
+    run.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    run.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
+    run.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
+    run.add_argument("--record", type=Path, help="write a Rerun recording to FILE.rrd")
+    run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
+    run.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer")
+    run.add_argument("--control-rate", type=_finite_float, default=100.0, help="IK rate [Hz]")
+    run.add_argument("--pace", type=_finite_float, help="run at most this many times real time")
+    run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+    sub.add_parser("scenarios", help="list the scenarios").add_argument(
+        "--json", action="store_true", help="print a JSON object on stdout"
+    )
+
+    sweep = sub.add_parser("sweep", help="run many seeds of a scenario in parallel")
+    sweep.add_argument("--scenario", default="pick-place-random")
+    sweep.add_argument("--controller", default="qp")
+    sweep.add_argument("--trials", type=_positive_int, default=20)
+    sweep.add_argument("--seed", type=_seed, default=0, help="seed of the first trial")
+    sweep.add_argument("--workers", type=_positive_int, default=1)
+    sweep.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    return parser
+
+
+def _print_error(message: str) -> None:
+    print(f"pickplace: error: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+def _progress(total: float, label: str) -> Any:
+    """A rich progress bar on stderr, or None when stderr is not a terminal."""
+    if not sys.stderr.isatty():
+        return None
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed:.1f}/{task.total:.1f}"),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    )
+    progress.add_task(label, total=total)
+    return progress
+
+
+class _ProgressObserver:
+    def __init__(self, progress: Any) -> None:
+        self.progress = progress
+
+    def on_start(self, run: Any) -> None:
+        task = self.progress.tasks[0]
+        self.progress.update(task.id, total=run.task.trajectory.end_time)
+        self.progress.start()
+
+    def on_tick(self, run: Any, tick: int) -> None:
+        if tick % 10 == 0:
+            self.progress.update(self.progress.tasks[0].id, completed=tick * run.dt)
+
+    def on_event(self, run: Any, event: Any) -> None:
+        return None
+
+    def on_finish(self, run: Any, result: Any) -> None:
+        self.progress.stop()
+
+
+def _human_summary(s: dict[str, Any]) -> str:
+    verdict = "SUCCESS" if s["success"] else f"FAILED ({s['failure']})"
+    lines = [
+        f"{s['scenario']} / {s['controller']} / seed {s['seed']}: {verdict}",
+        f"  sim {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s wall "
+        f"({s['realtime_factor']:.1f}x real time), {s['ticks']} ticks",
+    ]
+    if s["place_error_m"] is not None:
+        lines.append(
+            f"  brick final {[round(v, 4) for v in s['brick_final_xyz']]} m, "
+            f"place error {s['place_error_m'] * 1000:.1f} mm"
+        )
+    lines.append(
+        f"  min singular value {s['min_singular_value']:.4f}, max joint speed ratio "
+        f"{s['max_joint_speed_ratio']:.3f}, max tool position error "
+        f"{s['max_position_error_m'] * 1000:.1f} mm"
+    )
+    errors = [e["text"] for e in s["events"] if e["kind"] == "failure"]
+    if errors:
+        lines.append(f"  {errors[0]}")
+    if s["recording"]:
+        lines.append(f"  recording: {s['recording']}")
+    return "\n".join(lines)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from pickplace.runner import RunRequest, run
+
+    progress = None if args.json else _progress(1.0, f"{args.scenario}")
+    req = RunRequest(
+        scenario=args.scenario,
+        controller=args.controller,
+        seed=args.seed,
+        brick=args.brick,
+        scene_path=args.scene,
+        record=args.record,
+        spawn=args.spawn,
+        connect=args.connect,
+        control_rate_hz=args.control_rate,
+        pace=args.pace,
+        observers=[_ProgressObserver(progress)] if progress is not None else [],
+    )
+    result = run(req)
+    summary = result.summary()
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(_human_summary(summary))
+    if result.failure == "interrupted":
+        return EXIT_INTERRUPTED
+    return EXIT_OK if result.success else EXIT_FAILED
+
+
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    if args.json:
+        print(
+            json.dumps(
+                {s.name: {"summary": s.summary, "expected": s.expected} for s in SCENARIOS.values()}
+            )
+        )
+        return EXIT_OK
+    width = max(len(name) for name in SCENARIOS)
+    for s in SCENARIOS.values():
+        print(f"{s.name:<{width}}  {s.summary}")
+    return EXIT_OK
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from pickplace.sweep import SweepRequest, run_sweep
+
+    req = SweepRequest(args.scenario, args.controller, args.trials, args.seed, args.workers)
+    req.validate()
+    progress = None if args.json else _progress(float(args.trials), f"sweep {args.scenario}")
+    if progress is not None:
+        progress.start()
+
+    def advance(_: dict[str, Any]) -> None:
+        if progress is not None:
+            progress.advance(progress.tasks[0].id)
+
+    try:
+        report = run_sweep(req, on_trial=advance)
+    finally:
+        if progress is not None:
+            progress.stop()
+    if args.json:
+        print(json.dumps(report))
+    else:
+        p50, p95 = report["place_error_p50_m"], report["place_error_p95_m"]
+        print(
+            f"{report['scenario']} / {report['controller']}: {report['successes']}/"
+            f"{report['trials']} succeeded ({report['success_rate']:.0%}), "
+            f"{report['trials_per_second']:.2f} trials/s with {report['workers']} worker(s)"
+        )
+        if p50 is not None:
+            print(f"  place error p50 {p50 * 1000:.2f} mm, p95 {p95 * 1000:.2f} mm")
+        print(f"  min singular value {report['min_singular_value']:.4f}")
+        for reason, seeds in report["failed_seeds"].items():
+            print(f"  {reason}: seeds {' '.join(map(str, seeds))}")
+    return EXIT_OK if report["successes"] == report["trials"] else EXIT_FAILED
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``pickplace`` console script."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        handlers = {"run": _cmd_run, "scenarios": _cmd_scenarios, "sweep": _cmd_sweep}
+        return handlers[args.command](args)
+    except PickPlaceError as exc:
+        _print_error(str(exc))
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("pickplace: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())
