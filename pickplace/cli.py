@@ -24,6 +24,8 @@ class _Parser(argparse.ArgumentParser):
     """argparse that reports a usage error as one line and exit code 2."""
 
     def error(self, message: str) -> NoReturn:
+        if "expected one argument" in message:
+            message += "; a value starting with '-' needs '=', e.g. --brick=-0.1,-0.55,0"
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

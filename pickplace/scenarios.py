@@ -49,8 +49,16 @@ def brick_on_floor(scene: Scene, p: BrickPlacement, bin_floor_z: float) -> SE3:
     return brick_pose(p.x, p.y, bin_floor_z + float(scene.brick_half_extents[2]), p.yaw)
 
 
-def check_brick_in_source_bin(scene: Scene, p: BrickPlacement) -> None:
-    """Raise InvalidInputError if the brick footprint at ``p`` is not inside bin 1's walls."""
+def check_brick_in_source_bin(
+    scene: Scene, p: BrickPlacement, open_width: float | None = None
+) -> None:
+    """Raise InvalidInputError unless the brick at ``p`` lies in bin 1 and can be grasped.
+
+    The brick's footprint must be inside bin 1's inner walls, and so must the open fingers
+    around it: they reach ``open_width / 2 + scene.finger_outer_offset`` from the brick's
+    centre along its y axis (the closing axis), over the pads' width along its x axis.
+    """
+    open_width = PlanConfig().open_width if open_width is None else open_width
     values = (p.x, p.y, p.yaw)
     if not all(math.isfinite(v) for v in values):
         raise InvalidInputError(f"--brick values must be finite numbers, got {values}")
@@ -67,6 +75,15 @@ def check_brick_in_source_bin(scene: Scene, p: BrickPlacement) -> None:
             f"footprint must lie within the inner walls, centre x in "
             f"[{c[0] - h[0]:.2f}, {c[0] + h[0]:.2f}] and y in [{c[1] - h[1]:.2f}, "
             f"{c[1] + h[1]:.2f}] m minus the brick's half-size"
+        )
+    reach = open_width / 2 + scene.finger_outer_offset
+    fingers = np.array([[sx * 0.01, sy * reach, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+    fingers_W = fingers @ X_WO.rotation().as_matrix().T + X_WO.translation()
+    if not bin_.contains_xy(fingers_W):
+        raise InvalidInputError(
+            f"--brick {p.x:g},{p.y:g},{p.yaw:g} is too close to {bin_.name}'s walls to grasp: "
+            f"the open fingers reach {reach * 1000:.0f} mm from the brick's centre across its "
+            f"width; move it inwards or turn it so that its long side faces the wall"
         )
 
 

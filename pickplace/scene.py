@@ -181,6 +181,8 @@ class Scene:
         finger_qpos_adr: qpos addresses of the two finger joints (gap = sum) [m].
         gripper_max_gap: Largest commandable finger gap [m].
         gripper_force_limit: Actuator force bound = squeeze per jaw [N].
+        finger_outer_offset: Distance from a closed finger's inner pad face to its outer face
+            along the closing axis [m]: an open finger reaches gap/2 + this from the centre.
         pad_geom_ids: Geoms of the left and right finger pads.
         tool_site_id: Site at the grasp point, z along the approach direction.
         flange_site_id: Site at the arm's flange.
@@ -211,6 +213,7 @@ class Scene:
     finger_qpos_adr: np.ndarray
     gripper_max_gap: float
     gripper_force_limit: float
+    finger_outer_offset: float
     pad_geom_ids: tuple[int, int]
     tool_site_id: int
     flange_site_id: int
@@ -237,6 +240,17 @@ class Scene:
         mujoco.mj_resetDataKeyframe(self.model, data, self.home_key_id)
         mujoco.mj_forward(self.model, data)
         return data
+
+
+def _finger_outer_offset(model: mujoco.MjModel, finger_joint: int) -> float:
+    """Outer extent of a finger's box geoms along its joint axis, from the joint's zero [m]."""
+    body = model.jnt_bodyid[finger_joint]
+    axis = model.jnt_axis[finger_joint]
+    extent = 0.0
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] == body and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+            extent = max(extent, float(model.geom_pos[g] @ axis + np.abs(axis) @ model.geom_size[g]))
+    return extent
 
 
 def compile_scene(path: Path) -> mujoco.MjModel:
@@ -318,6 +332,7 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         finger_qpos_adr=model.jnt_qposadr[finger_ids].copy(),
         gripper_max_gap=float(model.actuator_ctrlrange[grip_id, 1]),
         gripper_force_limit=float(model.actuator_forcerange[grip_id, 1]),
+        finger_outer_offset=_finger_outer_offset(model, finger_ids[0]),
         pad_geom_ids=pad_ids,
         tool_site_id=name_to_id(model, obj.mjOBJ_SITE, names.tool_site),
         flange_site_id=name_to_id(model, obj.mjOBJ_SITE, names.flange_site),
