@@ -418,10 +418,15 @@ class Simulation:
             obs.on_start(self)
         wall0 = time.perf_counter()
         interrupted = False
+        # MuJoCo's warnings become events instead of lines in ./MUJOCO_LOG.TXT.
+        previous_handler = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(self._on_mujoco_warning)
         try:
             self._loop()
         except KeyboardInterrupt:
             interrupted = True
+        finally:
+            mujoco.set_mju_user_warning(previous_handler)
         wall = time.perf_counter() - wall0
         if interrupted:
             self.failure = "interrupted"
@@ -549,6 +554,9 @@ class Simulation:
             self._grasp_checks(t + self.dt, k, X_WG, forces)
         for obs in self.observers:
             obs.on_tick(self, k)
+
+    def _on_mujoco_warning(self, message: str) -> None:
+        self.emit("mujoco-warning", f"MuJoCo: {message}", level="warn")
 
     def _bad_state_warnings(self) -> int:
         w = self.data.warning

@@ -1,0 +1,51 @@
+"""Shared fixtures: the default scene, and helpers to run scenarios and the CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from pickplace.scene import SCENES_DIR, Scene, load_scene
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="session")
+def scene() -> Scene:
+    """The default scene (do not mutate its model: faults need a fresh one)."""
+    return load_scene()
+
+
+def scene_files() -> list[Path]:
+    """Every MJCF file in scenes/."""
+    return sorted(SCENES_DIR.glob("*.xml"))
+
+
+def run_cli(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """Run ``pickplace ARGS`` in a subprocess, exactly as a user would."""
+    env = dict(os.environ)
+    return subprocess.run(
+        [sys.executable, "-m", "pickplace.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+        cwd=REPO,
+        check=False,
+    )
+
+
+def run_cli_json(*args: str) -> tuple[int, dict[str, Any]]:
+    """Run ``pickplace run ARGS --json`` and parse its one JSON object."""
+    proc = run_cli("run", *args, "--json")
+    lines = [line for line in proc.stdout.splitlines() if line.strip()]
+    assert len(lines) == 1, (
+        f"expected one JSON line, got stdout={proc.stdout!r} stderr={proc.stderr!r}"
+    )
+    return proc.returncode, json.loads(lines[0])

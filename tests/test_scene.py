@@ -1,0 +1,155 @@
+"""Scene files: they compile, step quietly, and model the lecture's arm, gripper and bins."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from pickplace.errors import SceneError, UnknownNameError
+from pickplace.scene import DEFAULT_SCENE, SceneNames, load_scene
+from tests.conftest import scene_files
+
+# Sum of the iiwa 14 joint offsets along z plus the flange (issue 2): the flange height at q = 0.
+FLANGE_HEIGHT_AT_ZERO = 0.1575 + 0.2025 + 0.2045 + 0.2155 + 0.1845 + 0.2155 + 0.081 + 0.045
+
+
+@pytest.mark.parametrize("path", scene_files(), ids=lambda p: p.name)
+def test_every_scene_compiles_and_steps_one_second_without_warnings(path: Path) -> None:
+    messages: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+        data = mujoco.MjData(model)
+        key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
+        assert key >= 0, f"{path.name} has no 'home' keyframe"
+        mujoco.mj_resetDataKeyframe(model, data, key)
+        for _ in range(int(round(1.0 / model.opt.timestep))):
+            mujoco.mj_step(model, data)
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    assert messages == []
+    assert [w.number for w in data.warning] == [0] * len(data.warning)
+    assert np.all(np.isfinite(data.qpos))
+
+
+def test_scene_options_suit_a_friction_grasp(scene) -> None:
+    opt = scene.model.opt
+    assert opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    assert opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    assert opt.impratio >= 10
+    assert opt.timestep <= 0.002
+
+
+def test_arm_has_seven_limited_hinges_in_one_chain(scene) -> None:
+    m = scene.model
+    assert len(scene.arm_joint_ids) == 7
+    bodies = [m.jnt_bodyid[j] for j in scene.arm_joint_ids]
+    for parent, child in zip(bodies[:-1], bodies[1:], strict=True):
+        assert m.body_parentid[child] == parent
+    for j in scene.arm_joint_ids:
+        assert m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
+        assert m.jnt_limited[j]
+    np.testing.assert_allclose(
+        np.rad2deg(scene.q_max), [170, 120, 170, 120, 170, 120, 175], atol=1e-3
+    )
+    np.testing.assert_allclose(np.rad2deg(scene.v_max), [85, 85, 100, 75, 130, 135, 135], atol=1e-5)
+    for b in bodies:
+        assert m.body_gravcomp[b] == 1.0
+
+
+def test_tool_site_lies_between_the_pads_with_z_along_the_approach(scene) -> None:
+    data = scene.make_data()
+    p_tool = data.site_xpos[scene.tool_site_id]
+    p_pads = data.geom_xpos[list(scene.pad_geom_ids)]
+    np.testing.assert_allclose(p_tool, p_pads.mean(axis=0), atol=1e-9)
+    z_tool = data.site_xmat[scene.tool_site_id].reshape(3, 3)[:, 2]
+    p_flange = data.site_xpos[scene.flange_site_id]
+    approach = (p_tool - p_flange) / np.linalg.norm(p_tool - p_flange)
+    np.testing.assert_allclose(z_tool, approach, atol=1e-9)
+
+
+def test_brick_starts_inside_bin1_and_stays_at_rest(scene) -> None:
+    m = scene.model
+    data = scene.make_data()
+    p0 = data.xpos[scene.brick_body_id].copy()
+    assert scene.source_bin.contains_xy(p0[None])
+    for _ in range(int(round(1.0 / m.opt.timestep))):
+        mujoco.mj_step(m, data)
+    assert np.linalg.norm(data.xpos[scene.brick_body_id] - p0) < 1e-3
+    v = data.qvel[scene.brick_dof_adr : scene.brick_dof_adr + 6]
+    assert np.linalg.norm(v) < 1e-3
+
+
+@pytest.mark.parametrize("gap", [0.0, 0.11, 0.05])
+def test_empty_gripper_reaches_the_commanded_gap(gap: float) -> None:
+    scene = load_scene()
+    m = scene.model
+    data = scene.make_data()
+    data.ctrl[scene.gripper_actuator_id] = gap
+    for _ in range(int(round(1.0 / m.opt.timestep))):
+        mujoco.mj_step(m, data)
+    measured = float(np.sum(data.qpos[scene.finger_qpos_adr]))
+    assert abs(measured - gap) < 0.002
+
+
+def test_flange_at_zero_is_straight_above_the_base_and_the_jacobian_has_rank_three(
+    scene,
+) -> None:
+    m = scene.model
+    data = mujoco.MjData(m)
+    mujoco.mj_forward(m, data)  # qpos0: every arm joint at 0
+    assert np.all(data.qpos[scene.arm_qpos_adr] == 0)
+    p_flange = data.site_xpos[scene.flange_site_id]
+    p_base = data.xpos[m.body("base").id]
+    np.testing.assert_allclose(p_flange - p_base, [0, 0, FLANGE_HEIGHT_AT_ZERO], atol=1e-3)
+    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    mujoco.mj_jacSite(m, data, jacp, jacr, scene.flange_site_id)
+    J = np.vstack([jacp, jacr])[:, scene.arm_dof_adr]
+    sigma = np.linalg.svd(J, compute_uv=False)
+    assert np.all(sigma[:3] > 0.1)
+    assert np.all(sigma[3:] < 1e-9)
+
+
+def test_home_posture_is_bent_and_well_conditioned(scene) -> None:
+    m = scene.model
+    data = scene.make_data()
+    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    mujoco.mj_jacSite(m, data, jacp, jacr, scene.tool_site_id)
+    sigma = np.linalg.svd(np.vstack([jacp, jacr])[:, scene.arm_dof_adr], compute_uv=False)
+    assert sigma[-1] > 0.1
+    assert abs(scene.q_home[3]) > 0.5  # elbow bent
+
+
+def test_bins_are_reachable_open_boxes_on_two_sides(scene) -> None:
+    for b in (scene.source_bin, scene.target_bin):
+        assert b.wall_top_z > b.floor_top_z
+        assert np.all(b.inner_half_extents > 0.1)
+    a = scene.source_bin.center_W[:2] - scene.p_W_base[:2]
+    c = scene.target_bin.center_W[:2] - scene.p_W_base[:2]
+    swing = np.degrees(np.arccos(a @ c / np.linalg.norm(a) / np.linalg.norm(c)))
+    assert swing >= 60.0
+
+
+def test_unknown_name_lists_the_names_that_exist() -> None:
+    with pytest.raises(UnknownNameError, match=r"unknown site 'tcp'; valid: .*wsg50/tool"):
+        load_scene(names=SceneNames(tool_site="tcp"))
+    with pytest.raises(UnknownNameError, match=r"unknown joint 'joint8'; valid: .*joint7"):
+        load_scene(names=SceneNames(arm_joints=(*SceneNames().arm_joints[:6], "joint8")))
+
+
+def test_missing_and_invalid_scene_files(tmp_path: Path) -> None:
+    with pytest.raises(SceneError, match="does not exist"):
+        load_scene(tmp_path / "missing.xml")
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<mujoco><worldbody><body></mujoco>")
+    with pytest.raises(SceneError, match="not valid MJCF"):
+        load_scene(bad)
+
+
+def test_relative_scene_path_loads(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(DEFAULT_SCENE.parent.parent)
+    assert load_scene(Path("scenes") / "scene.xml").model.nu == 8
