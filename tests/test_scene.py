@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import mujoco
@@ -27,7 +28,7 @@ def test_every_scene_compiles_and_steps_one_second_without_warnings(path: Path) 
         key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
         assert key >= 0, f"{path.name} has no 'home' keyframe"
         mujoco.mj_resetDataKeyframe(model, data, key)
-        for _ in range(int(round(1.0 / model.opt.timestep))):
+        for _ in range(round(1.0 / model.opt.timestep)):
             mujoco.mj_step(model, data)
     finally:
         mujoco.set_mju_user_warning(previous)
@@ -48,7 +49,7 @@ def test_arm_has_seven_limited_hinges_in_one_chain(scene) -> None:
     m = scene.model
     assert len(scene.arm_joint_ids) == 7
     bodies = [m.jnt_bodyid[j] for j in scene.arm_joint_ids]
-    for parent, child in zip(bodies[:-1], bodies[1:], strict=True):
+    for parent, child in itertools.pairwise(bodies):
         assert m.body_parentid[child] == parent
     for j in scene.arm_joint_ids:
         assert m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
@@ -77,7 +78,7 @@ def test_brick_starts_inside_bin1_and_stays_at_rest(scene) -> None:
     data = scene.make_data()
     p0 = data.xpos[scene.brick_body_id].copy()
     assert scene.source_bin.contains_xy(p0[None])
-    for _ in range(int(round(1.0 / m.opt.timestep))):
+    for _ in range(round(1.0 / m.opt.timestep)):
         mujoco.mj_step(m, data)
     assert np.linalg.norm(data.xpos[scene.brick_body_id] - p0) < 1e-3
     v = data.qvel[scene.brick_dof_adr : scene.brick_dof_adr + 6]
@@ -90,7 +91,7 @@ def test_empty_gripper_reaches_the_commanded_gap(gap: float) -> None:
     m = scene.model
     data = scene.make_data()
     data.ctrl[scene.gripper_actuator_id] = gap
-    for _ in range(int(round(1.0 / m.opt.timestep))):
+    for _ in range(round(1.0 / m.opt.timestep)):
         mujoco.mj_step(m, data)
     measured = float(np.sum(data.qpos[scene.finger_qpos_adr]))
     assert abs(measured - gap) < 0.002
