@@ -7,7 +7,6 @@ inputs the same way and produce the same summaries.
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -82,10 +81,18 @@ def validate_record_path(path: Path) -> Path:
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise InvalidInputError(f"--record '{path}': folder '{parent}' does not exist")
-    if not os.access(parent, os.W_OK):
-        raise InvalidInputError(f"--record '{path}': folder '{parent}' is not writable")
     if path.is_dir():
         raise InvalidInputError(f"--record '{path}' is a directory; give a file name ending .rrd")
+    existed = path.exists()
+    try:  # os.access says yes to root even on read-only file systems: try it.
+        with open(path, "ab"):
+            pass
+    except OSError as exc:
+        raise InvalidInputError(
+            f"--record '{path}': folder '{parent}' is not writable ({exc.strerror})"
+        ) from None
+    if not existed:
+        path.unlink()
     return path
 
 
