@@ -25,8 +25,9 @@ from typing import ClassVar
 
 import daqp
 import mink
+import mujoco
 import numpy as np
-from mink.lie import SE3, SO3
+from mink.lie import SE3
 
 from pickplace.errors import ControllerError, UnknownNameError, require_positive
 from pickplace.kinematics import ArmKinematics, pose_error_W
@@ -112,21 +113,24 @@ class DiffIKController(ABC):
         self.v_max = scene.v_max.copy()
         self._K = np.repeat([self.gains.position, self.gains.orientation], 3)
 
-    def command(self, q: np.ndarray, X_WG_target: SE3, V_WG_ff: np.ndarray) -> IKResult:
+    def command(
+        self, q: np.ndarray, X_WG_target: SE3 | np.ndarray, V_WG_ff: np.ndarray
+    ) -> IKResult:
         """Joint velocities that move the tool toward ``X_WG_target`` at ``V_WG_ff``.
 
         Args:
             q: Current (commanded) joint positions [rad].
-            X_WG_target: Desired tool pose now.
+            X_WG_target: Desired tool pose now, as an SE3 or its wxyz_xyz vector.
             V_WG_ff: Desired tool spatial velocity [v; ω] in world [m/s, rad/s].
         """
+        x_target = X_WG_target.wxyz_xyz if isinstance(X_WG_target, SE3) else X_WG_target
         kin = self.kinematics
         kin.update(q)
-        X_WG = kin.X_WG()
+        x_WG = kin.wxyz_xyz()
         J = kin.J_WG()
-        error = pose_error_W(X_WG, X_WG_target)
-        V_cmd = np.asarray(V_WG_ff, dtype=float) + self._K * error
-        qdot, status = self._solve(q, X_WG, J, V_cmd)
+        error = pose_error_W(x_WG, x_target)
+        V_cmd = V_WG_ff + self._K * error
+        qdot, status = self._solve(q, x_WG, J, V_cmd)
         if status is IKStatus.OK and float(V_cmd @ V_cmd) > _REST_TWIST**2:
             achieved = float(V_cmd @ (J @ qdot)) / float(V_cmd @ V_cmd)
             if achieved < _STUCK_FRACTION:
@@ -135,7 +139,7 @@ class DiffIKController(ABC):
 
     @abstractmethod
     def _solve(
-        self, q: np.ndarray, X_WG: SE3, J: np.ndarray, V_cmd: np.ndarray
+        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
         """Return joint velocities [rad/s] realising ``V_cmd`` and a status."""
 
@@ -155,7 +159,7 @@ class PinvController(DiffIKController):
         self.cutoff = require_positive("pinv cutoff", cutoff)
 
     def _solve(
-        self, q: np.ndarray, X_WG: SE3, J: np.ndarray, V_cmd: np.ndarray
+        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
         U, s, Vt = np.linalg.svd(J, full_matrices=False)
         s_inv = np.where(s > self.cutoff, 1.0 / np.where(s > 0.0, s, 1.0), 0.0)
@@ -176,7 +180,7 @@ class DLSController(DiffIKController):
         self.damping = require_positive("dls damping", damping)
 
     def _solve(
-        self, q: np.ndarray, X_WG: SE3, J: np.ndarray, V_cmd: np.ndarray
+        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
         JJt = J @ J.T
         JJt.flat[:: JJt.shape[0] + 1] += self.damping**2
@@ -267,19 +271,26 @@ class QPController(DiffIKController):
         self._q_lo = self.configuration_limit.lower.copy()
         self._q_hi = self.configuration_limit.upper.copy()
         self._H_const = np.eye(nv) * (w.posture_cost**2 + w.damping)
+        self._unit_quat = np.array([1.0, 0.0, 0.0, 0.0])
+        self._last_bounds = self.bounds(scene.q_home)
         self._solve_qp: Callable[[np.ndarray], np.ndarray | None] = (
             self._solve_fast if backend == "fast" else self._solve_mink
         )
 
-    def set_frame_target(self, X_WG: SE3, V_cmd: np.ndarray) -> None:
-        """Aim the frame task one tick ahead of ``X_WG`` along ``V_cmd``."""
-        v, w = V_cmd[:3], V_cmd[3:]
-        R_next = SO3.exp(w * self.dt) @ X_WG.rotation()
-        self.frame_task.set_target(
-            SE3.from_rotation_and_translation(R_next, X_WG.translation() + v * self.dt)
-        )
+    def set_frame_target(self, x_WG: np.ndarray, V_cmd: np.ndarray) -> None:
+        """Aim the frame task one tick ahead of ``x_WG`` (wxyz_xyz) along ``V_cmd``.
+
+        Target: position p + v·dt, orientation exp(ω·dt)·R (ω in world).
+        """
+        step = self._unit_quat.copy()
+        mujoco.mju_quatIntegrate(step, V_cmd[3:], self.dt)  # exp(ω dt)
+        target = np.empty(7)
+        mujoco.mju_mulQuat(target[:4], step, x_WG[:4])
+        target[4:] = x_WG[4:] + V_cmd[:3] * self.dt
+        self.frame_task.set_target(SE3(wxyz_xyz=target))
 
     def _solve_mink(self, q: np.ndarray) -> np.ndarray | None:
+        self._last_bounds = self.bounds(q)
         try:
             return mink.solve_ik(
                 self.configuration, self.tasks, self.dt, solver="daqp", limits=self.limits
@@ -300,24 +311,24 @@ class QPController(DiffIKController):
         H = W.T @ W + self._H_const
         H.flat[:: H.shape[0] + 1] += mu
         c = -(e @ W) - self.weights.posture_cost**2 * e_posture
-        lower, upper = self.bounds(q)
+        lower, upper = self._last_bounds = self.bounds(q)
         x, _, exitflag, _ = daqp.solve(H, c, self._A_empty, upper, lower)
         if exitflag < 1:
             return None
         return np.asarray(x) / self.dt
 
     def _solve(
-        self, q: np.ndarray, X_WG: SE3, J: np.ndarray, V_cmd: np.ndarray
+        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
-        self.set_frame_target(X_WG, V_cmd)
+        self.set_frame_target(x_WG, V_cmd)
         qdot = self._solve_qp(q)
         if qdot is None:
             return np.zeros_like(q), IKStatus.NO_SOLUTION
-        lower, upper = self.bounds(q)
+        lower, upper = self._last_bounds
         dq = qdot * self.dt
-        tol = 1e-9
-        at_bound = np.any(dq >= upper - tol) or np.any(dq <= lower + tol)
-        return qdot, IKStatus.LIMITED if at_bound else IKStatus.OK
+        # A joint whose step sits on its bound (within 1e-9 rad) was limited.
+        slack = min(float((upper - dq).min()), float((dq - lower).min()))
+        return qdot, IKStatus.LIMITED if slack <= 1e-9 else IKStatus.OK
 
 
 CONTROLLERS: dict[str, type[DiffIKController]] = {

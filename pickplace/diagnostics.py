@@ -11,11 +11,26 @@ Jacobian J (m × n, m ≤ n) with singular values σ₁ ≥ … ≥ σₘ:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 GRAVITY_W = np.array([0.0, 0.0, -9.81])
+
+
+def manipulability_measures(sigma: np.ndarray) -> tuple[float, float, float, float, float]:
+    """(condition, w1, w2, w3, w4) of singular values sorted in decreasing order."""
+    values = sigma.tolist()
+    smax, smin = values[0], values[-1]
+    prod = math.prod(values)
+    return (
+        smax / smin if smin > 0.0 else float("inf"),
+        prod,
+        smin / smax if smax > 0.0 else 0.0,
+        smin,
+        prod ** (1.0 / len(sigma)),
+    )
 
 
 @dataclass(frozen=True)
@@ -42,16 +57,8 @@ class Manipulability:
     def from_singular_values(cls, sigma: np.ndarray) -> Manipulability:
         """Compute every measure from singular values (any order)."""
         s = np.sort(np.asarray(sigma, dtype=float))[::-1]
-        smax, smin = float(s[0]), float(s[-1])
-        prod = float(np.prod(s))
-        return cls(
-            singular_values=s,
-            condition=smax / smin if smin > 0.0 else float("inf"),
-            w1=prod,
-            w2=smin / smax if smax > 0.0 else 0.0,
-            w3=smin,
-            w4=prod ** (1.0 / len(s)),
-        )
+        condition, w1, w2, w3, w4 = manipulability_measures(s)
+        return cls(singular_values=s, condition=condition, w1=w1, w2=w2, w3=w3, w4=w4)
 
     def as_array(self) -> np.ndarray:
         """[w1, w2, w3, w4]."""

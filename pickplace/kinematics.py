@@ -75,6 +75,13 @@ class ArmKinematics:
             SO3.from_matrix(R), self.data.site_xpos[self.tool_site_id].copy()
         )
 
+    def wxyz_xyz(self) -> np.ndarray:
+        """Pose of the tool site as mink's parameter vector [qw, qx, qy, qz, x, y, z]."""
+        out = np.empty(7)
+        mujoco.mju_mat2Quat(out[:4], self.data.site_xmat[self.tool_site_id])
+        out[4:] = self.data.site_xpos[self.tool_site_id]
+        return out
+
     def p_WG(self) -> np.ndarray:
         """Position of the tool site in world [m] at the loaded q."""
         return self.data.site_xpos[self.tool_site_id].copy()
@@ -93,11 +100,27 @@ class ArmKinematics:
         return np.vstack([self._jacp, self._jacr])
 
 
-def pose_error_W(X_WG: SE3, X_WG_target: SE3) -> np.ndarray:
-    """Error (6,) from ``X_WG`` to ``X_WG_target``: [p_target - p; log(R_target R^T)] in world.
+def rotation_vector_W(quat_from: np.ndarray, quat_to: np.ndarray) -> np.ndarray:
+    """World-frame rotation vector [rad] of the shortest rotation taking ``quat_from`` to
+    ``quat_to`` (both wxyz): log(R_to R_fromᵀ)."""
+    conj = np.empty(4)
+    mujoco.mju_negQuat(conj, quat_from)
+    q_err = np.empty(4)
+    mujoco.mju_mulQuat(q_err, quat_to, conj)
+    if q_err[0] < 0.0:  # q and -q are the same rotation: take the short way round
+        q_err = -q_err
+    w = np.empty(3)
+    mujoco.mju_quat2Vel(w, q_err, 1.0)
+    return w
 
-    The angular part is the world-frame rotation vector [rad] that takes R_WG onto R_WG_target.
+
+def pose_error_W(x_WG: np.ndarray, x_WG_target: np.ndarray) -> np.ndarray:
+    """Error (6,) between two poses given as wxyz_xyz vectors (see :meth:`SE3.wxyz_xyz`).
+
+    Returns [p_target − p; log(R_target Rᵀ)]: the position error [m] and the world-frame
+    rotation vector [rad] that takes R_WG onto R_WG_target.
     """
-    dp = X_WG_target.translation() - X_WG.translation()
-    dR = X_WG_target.rotation() @ X_WG.rotation().inverse()
-    return np.concatenate([dp, dR.log()])
+    out = np.empty(6)
+    out[:3] = x_WG_target[4:] - x_WG[4:]
+    out[3:] = rotation_vector_W(x_WG[:4], x_WG_target[:4])
+    return out

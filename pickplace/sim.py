@@ -16,6 +16,7 @@ The verdict is judged from geometry stated in :class:`SuccessCriteria`, never as
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -26,8 +27,9 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.controllers import IK_STATUSES, DiffIKController, IKStatus
-from pickplace.diagnostics import holding_torques, jacobian_health
+from pickplace.diagnostics import holding_torques, manipulability_measures
 from pickplace.errors import InvalidInputError, require_positive
+from pickplace.kinematics import rotation_vector_W
 from pickplace.scene import Scene
 from pickplace.trajectory import PoseTrajectory
 
@@ -260,8 +262,7 @@ class Task:
     release_keyframe: str = "release"
 
 
-class Interrupted(Exception):  # noqa: N818 - a state, not an error
-    """Raised inside the loop when the user interrupts (Ctrl-C)."""
+_STATUS_CODE = {status: IK_STATUSES.index(status.value) for status in IKStatus}
 
 
 class Simulation:
@@ -334,6 +335,21 @@ class Simulation:
         signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
         self._corners_O = signs * brick_size
         self._brick_width = 2.0 * float(brick_size[1])
+        self._pad_pairs = [(pad, scene.brick_geom_id) for pad in scene.pad_geom_ids]
+        self._bad_count = self._bad_state_warnings()
+        self._time_expected = float(self.data.time)
+        self._eig, self._eigvec, self._eigquat = np.empty(3), np.empty(9), np.empty(4)
+        self._inv_v_max = 1.0 / scene.v_max
+        self._finger_adr = (int(scene.finger_qpos_adr[0]), int(scene.finger_qpos_adr[1]))
+        times = {kf.name: kf.t for kf in task.trajectory.keyframes}
+        if task.goal == "place":
+            names = [kf.name for kf in task.trajectory.keyframes]
+            i_release = names.index(task.release_keyframe)
+            self._grasp_times = (
+                times[task.grasp_keyframe],
+                task.trajectory.keyframes[i_release - 1].t,
+                times[task.release_keyframe],
+            )
 
     # ------------------------------------------------------------------ measurements
 
@@ -352,23 +368,24 @@ class Simulation:
 
     def gripper_gap(self) -> float:
         """Measured finger gap [m]."""
-        return float(np.sum(self.data.qpos[self.scene.finger_qpos_adr]))
+        qpos = self.data.qpos
+        return float(qpos[self._finger_adr[0]] + qpos[self._finger_adr[1]])
 
     def pad_forces(self) -> np.ndarray:
         """Normal force [N] of the brick on the left and right pads."""
         forces = np.zeros(2)
-        brick = self.scene.brick_geom_id
-        left, right = self.scene.pad_geom_ids
         d = self.data
-        for i in range(d.ncon):
-            c = d.contact[i]
-            g1, g2 = int(c.geom1), int(c.geom2)
-            if brick not in (g1, g2):
-                continue
-            other = g2 if g1 == brick else g1
-            if other in (left, right):
-                mujoco.mj_contactForce(self.model, d, i, self._f6)
-                forces[0 if other == left else 1] += self._f6[0]
+        if d.ncon == 0:
+            return forces
+        geoms = d.contact.geom[: d.ncon]
+        for i, pair in enumerate(self._pad_pairs):
+            rows = np.flatnonzero(
+                ((geoms[:, 0] == pair[0]) & (geoms[:, 1] == pair[1]))
+                | ((geoms[:, 0] == pair[1]) & (geoms[:, 1] == pair[0]))
+            )
+            for row in rows:
+                mujoco.mj_contactForce(self.model, d, int(row), self._f6)
+                forces[i] += self._f6[0]
         return forces
 
     def brick_touches_gripper(self) -> bool:
@@ -383,9 +400,11 @@ class Simulation:
                     return True
         return False
 
-    def _p_GO(self, X_WG: SE3) -> np.ndarray:
-        X_GO = X_WG.inverse() @ self.brick_pose()
-        return np.asarray(X_GO.translation())
+    def _p_GO(self) -> np.ndarray:
+        """Brick centre in the tool frame G [m]."""
+        d, site = self.data, self.scene.tool_site_id
+        R_WG = d.site_xmat[site].reshape(3, 3)
+        return R_WG.T @ (d.xpos[self.scene.brick_body_id] - d.site_xpos[site])
 
     # ------------------------------------------------------------------ events
 
@@ -467,78 +486,91 @@ class Simulation:
             if text:
                 self.emit("fault", f"fault '{fault.name}': {text}", level="warn")
 
-        X_plan = traj.pose(t)
+        x_plan = traj.pose_wxyz_xyz(t)
         V_plan = traj.spatial_velocity(t)
         t0 = time.perf_counter_ns()
-        res = self.controller.command(self.q_cmd, X_plan, V_plan)
+        res = self.controller.command(self.q_cmd, x_plan, V_plan)
         ik_ns = time.perf_counter_ns() - t0
         qdot = res.qdot
-        if not np.all(np.isfinite(qdot)):
+        if not math.isfinite(float(qdot.sum())):
             self.fail("nan", f"controller returned non-finite joint velocities at t={t:.3f} s")
             qdot = np.zeros(7)
-        q_prev = self.q_cmd
-        self.q_cmd = q_prev + qdot * self.dt
-        health = jacobian_health(res.J_WG)
+        # The kinematics still hold the FK of the q_cmd the IK just used: the commanded frame.
+        log.p_WG_cmd[k] = self.controller.kinematics.p_WG()
+        mujoco.mju_mat2Quat(log.quat_WG_cmd[k], self.controller.kinematics.R_WG().ravel())
+        self.q_cmd = self.q_cmd + qdot * self.dt
+
+        # Jacobian health (seed notes 003): singular values of J and of its translational rows.
+        J = res.J_WG
+        sigma = np.linalg.svd(J, compute_uv=False)
+        # Translational ellipsoid: eigen-decomposition of J_v J_vᵀ = U Σ² Uᵀ. mju_eig3 returns
+        # eigenvalues in decreasing order and U as a proper rotation (columns = axes).
+        Jv = J[:3]
+        mujoco.mju_eig3(self._eig, self._eigvec, self._eigquat, (Jv @ Jv.T).ravel())
+        sigma_t = np.sqrt(np.maximum(self._eig, 0.0))
+        log.sigma[k] = sigma
+        log.sigma_t[k] = sigma_t
+        log.U_t[k] = self._eigvec.reshape(3, 3)
+        c, *w = manipulability_measures(sigma)
+        log.condition[k] = c
+        log.manipulability[k] = w
+        c, *w = manipulability_measures(sigma_t)
+        log.condition_t[k] = c
+        log.manipulability_t[k] = w
 
         width = traj.gripper_width(t)
         ctrl_gripper = width if self.gripper_ctrl_override is None else self.gripper_ctrl_override
         self.gripper_ctrl_last = ctrl_gripper
         d.ctrl[sc.arm_actuator_ids] = self.q_cmd + self._ff * qdot
         d.ctrl[sc.gripper_actuator_id] = ctrl_gripper
-        bad_before = self._bad_state_warnings()
         for _ in range(self.substeps):
             mujoco.mj_step(self.model, d)
-        # MuJoCo resets the state after a NaN and counts a warning: watch both.
-        if self._bad_state_warnings() != bad_before or not (
-            np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))
-        ):
+        # MuJoCo resets the data (time back to 0) after a NaN and counts a warning, so a state
+        # that stopped advancing in time is as bad as a non-finite one.
+        self._time_expected += self.substeps * self.model.opt.timestep
+        if abs(d.time - self._time_expected) > 1e-6 or not math.isfinite(float(d.qacc.sum())):
+            self._bad_count = self._bad_state_warnings()
             self.fail("nan", f"simulation state became non-finite at t={t:.3f} s")
 
         # ---- store
-        X_WG = self.tool_pose()
+        site = sc.tool_site_id
+        p_WG = d.site_xpos[site]
+        quat_WG = log.quat_WG[k]
+        mujoco.mju_mat2Quat(quat_WG, d.site_xmat[site])
         log.t[k] = t + self.dt
         log.q_cmd[k] = self.q_cmd
         log.q[k] = d.qpos[sc.arm_qpos_adr]
         log.qdot_cmd[k] = qdot
-        log.p_WG_plan[k] = X_plan.translation()
-        log.quat_WG_plan[k] = X_plan.rotation().wxyz
-        kin = self.controller.kinematics
-        log.p_WG_cmd[k] = kin.p_WG()  # FK of the q_cmd the IK just used
-        log.quat_WG_cmd[k] = SO3.from_matrix(kin.R_WG()).wxyz
-        log.p_WG[k] = X_WG.translation()
-        log.quat_WG[k] = X_WG.rotation().wxyz
-        log.sigma[k] = health.full.singular_values
-        log.sigma_t[k] = health.translational.singular_values
-        log.U_t[k] = health.U_translational
-        log.condition[k] = health.full.condition
-        log.condition_t[k] = health.translational.condition
-        log.manipulability[k] = health.full.as_array()
-        log.manipulability_t[k] = health.translational.as_array()
-        err = (X_plan.inverse() @ X_WG).log()
-        log.position_error[k] = float(np.linalg.norm(X_WG.translation() - X_plan.translation()))
-        log.orientation_error[k] = float(np.linalg.norm(err[3:]))
+        log.p_WG_plan[k] = x_plan[4:]
+        log.quat_WG_plan[k] = x_plan[:4]
+        log.p_WG[k] = p_WG
+        dp = p_WG - x_plan[4:]
+        log.position_error[k] = math.sqrt(float(dp @ dp))
+        dw = rotation_vector_W(x_plan[:4], quat_WG)
+        log.orientation_error[k] = math.sqrt(float(dw @ dw))
         log.gripper_cmd[k] = ctrl_gripper
         log.gripper_gap[k] = self.gripper_gap()
         forces = self.pad_forces()
         log.pad_force[k] = forces
         holding = self._grasp_state == "holding"
-        log.holding_torque[k] = holding_torques(res.J_WG, sc.brick_mass) if holding else 0.0
+        log.holding_torque[k] = holding_torques(J, sc.brick_mass) if holding else 0.0
         log.ik_us[k] = ik_ns * 1e-3
-        log.ik_status[k] = IK_STATUSES.index(res.status.value)
+        log.ik_status[k] = _STATUS_CODE[res.status]
         log.body_pos[k] = d.xpos
         log.body_quat[k] = d.xquat
 
         # ---- checks
         if res.status is IKStatus.NO_SOLUTION:
             self.fail("ik-failed", f"the QP found no solution at t={t:.3f} s")
-        cmd_error = float(np.linalg.norm(res.error[:3]))
+        e = res.error
+        cmd_error = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
         if self.task.goal == "place" and cmd_error > self.criteria.tracking_limit:
             self.fail(
                 "ik-failed",
                 f"commanded tool is {cmd_error * 1000:.1f} mm from the plan at t={t:.3f} s "
                 f"(limit {self.criteria.tracking_limit * 1000:.0f} mm; status {res.status.value})",
             )
-        ratio = np.max(np.abs(qdot) / sc.v_max)
+        ratio = float((np.abs(qdot) * self._inv_v_max).max())
         if ratio > 1.0 + SPEED_RATIO_TOLERANCE:
             j = int(np.argmax(np.abs(qdot) / sc.v_max))
             self.fail(
@@ -551,7 +583,7 @@ class Simulation:
             self.fail("limit-violated", f"a joint is {over:.4f} rad past its limit at t={t:.3f} s")
         self._keyframe_events(t + self.dt, k)
         if self.task.goal == "place":
-            self._grasp_checks(t + self.dt, k, X_WG, forces)
+            self._grasp_checks(t + self.dt, k, forces)
         for obs in self.observers:
             obs.on_tick(self, k)
 
@@ -567,10 +599,15 @@ class Simulation:
         )
 
     def _limit_violation(self, q: np.ndarray, q_cmd: np.ndarray) -> float:
+        """Largest distance [rad] of ``q`` or ``q_cmd`` past a joint limit (0 inside)."""
         sc = self.scene
-        over = np.maximum(np.maximum(q - sc.q_max, sc.q_min - q), 0.0)
-        over_cmd = np.maximum(np.maximum(q_cmd - sc.q_max, sc.q_min - q_cmd), 0.0)
-        return float(max(over.max(), over_cmd.max()))
+        return max(
+            0.0,
+            float((q - sc.q_max).max()),
+            float((sc.q_min - q).max()),
+            float((q_cmd - sc.q_max).max()),
+            float((sc.q_min - q_cmd).max()),
+        )
 
     def _keyframe_events(self, t: float, k: int) -> None:
         while (
@@ -586,15 +623,9 @@ class Simulation:
                 f"tool {err * 1000:.1f} mm from plan)",
             )
 
-    def _grasp_checks(self, t: float, k: int, X_WG: SE3, forces: np.ndarray) -> None:
+    def _grasp_checks(self, t: float, k: int, forces: np.ndarray) -> None:
         cr = self.criteria
-        traj = self.task.trajectory
-        names = [kf.name for kf in traj.keyframes]
-        times = {kf.name: kf.t for kf in traj.keyframes}
-        t_grasp = times[self.task.grasp_keyframe]
-        t_release = times[self.task.release_keyframe]
-        i_release = names.index(self.task.release_keyframe)
-        t_place = traj.keyframes[i_release - 1].t
+        t_grasp, t_place, t_release = self._grasp_times
         if self._grasp_state == "open" and t >= t_grasp - 1e-9:
             gap = self.gripper_gap()
             firm = forces > cr.grasp_force_fraction * self.scene.gripper_force_limit
@@ -614,11 +645,11 @@ class Simulation:
                 self._grasp_state = "released"
                 return
             self._grasp_state = "holding"
-            self._p_GO_grasp = self._p_GO(X_WG)
+            self._p_GO_grasp = self._p_GO()
         elif self._grasp_state == "holding":
             if self._p_GO_grasp is None:  # holding always starts with a grasp pose
                 return
-            p_GO = self._p_GO(X_WG)
+            p_GO = self._p_GO()
             slip = float(np.linalg.norm(p_GO - self._p_GO_grasp))
             if t <= t_place + 1e-9:
                 self.log.slip[k] = slip

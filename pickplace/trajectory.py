@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
+import mujoco
 import numpy as np
 import numpy.typing as npt
 from mink.lie import SE3, SO3
@@ -243,6 +244,7 @@ class _Segment:
     p0: FloatArray
     dp: FloatArray
     R0: SO3
+    q0: FloatArray
     phi: FloatArray
     omega_dir_W: FloatArray
     width0: float
@@ -284,6 +286,7 @@ class PoseTrajectory:
                     p0=p0,
                     dp=np.asarray(b.X_WG.translation(), dtype=np.float64) - p0,
                     R0=R0,
+                    q0=np.array(R0.wxyz, dtype=np.float64),
                     phi=phi,
                     omega_dir_W=np.asarray(R0.apply(phi), dtype=np.float64),
                     width0=float(a.gripper_width),
@@ -342,6 +345,21 @@ class PoseTrajectory:
         s = self._profile.s(tau)
         R_WG = seg.R0 @ SO3.exp(s * seg.phi)
         return SE3.from_rotation_and_translation(R_WG, seg.p0 + s * seg.dp)
+
+    def pose_wxyz_xyz(self, t: float) -> FloatArray:
+        """:meth:`pose` as mink's parameter vector [qw, qx, qy, qz, x, y, z], computed with
+        MuJoCo's quaternion routines: the fast path of the control loop (equal to ``pose`` to
+        1e-12, up to the quaternion's sign)."""
+        out = np.empty(7, dtype=np.float64)
+        if t >= self._times[-1]:
+            out[:] = self._keyframes[-1].X_WG.wxyz_xyz
+            return out
+        seg, tau = self._locate(t)
+        s = self._profile.s(tau)
+        out[:4] = seg.q0
+        mujoco.mju_quatIntegrate(out[:4], seg.phi, s)  # R0 · exp(s φ), φ in R0's frame
+        out[4:] = seg.p0 + s * seg.dp
+        return out
 
     def spatial_velocity(self, t: float) -> FloatArray:
         """Spatial velocity ``V_WG = [v_W; ω_W]`` at time ``t`` [s], shape (6,).

@@ -311,3 +311,29 @@ def test_invalid_keyframes_are_rejected() -> None:
         Keyframe("", 0.0, SE3.identity(), 0.0)
     with pytest.raises(PlanError, match="keyframe 'x' X_WG must be finite"):
         Keyframe("x", 0.0, SE3(np.array([1.0, 0, 0, 0, math.inf, 0, 0])), 0.0)
+
+
+def test_fast_pose_path_equals_pose_up_to_quaternion_sign() -> None:
+    from mink.lie import SE3, SO3
+
+    from pickplace.grasp import brick_pose
+    from pickplace.plan import make_pick_place_keyframes
+    from pickplace.trajectory import PoseTrajectory
+
+    X0 = SE3.from_rotation_and_translation(
+        SO3.from_rpy_radians(np.pi, 0.1, 2.0), np.array([0.4, -0.4, 0.3])
+    )
+    keyframes = make_pick_place_keyframes(
+        X0,
+        brick_pose(0.05, -0.55, 0.035, 2.5),
+        brick_pose(0.55, 0.0, 0.035, -0.3),
+        0.26,
+        p_W_base=np.zeros(3),
+    )
+    traj = PoseTrajectory(keyframes)
+    for t in np.linspace(-1.0, traj.end_time + 1.0, 997):
+        a = traj.pose(float(t)).wxyz_xyz
+        b = traj.pose_wxyz_xyz(float(t))
+        sign = 1.0 if a[:4] @ b[:4] >= 0 else -1.0
+        np.testing.assert_allclose(b[:4] * sign, a[:4], atol=1e-12)
+        np.testing.assert_allclose(b[4:], a[4:], atol=1e-12)
