@@ -1,0 +1,198 @@
+"""Benchmark: where a run's time goes, as ratios and medians measured in one process and one run.
+
+Targets (issue 7; figures, not tests):
+- qp IK tick <= 0.5x mink.solve_ik on the identical problem;
+- nominal pick-and-place >= 40x real time headless, >= 30x while recording;
+- sweep throughput with all workers >= 1.8x that with 1 worker (2 cores).
+
+Usage: python scripts/bench.py [--json] [--trials N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import mink
+import mujoco
+import numpy as np
+
+from pickplace.controllers import QPController, make_controller
+from pickplace.diagnostics import jacobian_health
+from pickplace.kinematics import pose_error_W
+from pickplace.runner import RunRequest, prepare
+from pickplace.scene import load_scene
+from pickplace.sweep import SweepRequest, run_sweep
+
+TARGETS = {
+    "ik_tick_ratio_vs_mink": ("<=", 0.5),
+    "realtime_factor_headless": (">=", 40.0),
+    "realtime_factor_recording": (">=", 30.0),
+    "sweep_speedup_all_workers": (">=", 1.8),
+}
+
+
+def median_us(fn: Callable[[], object], repeats: int = 2000) -> float:
+    """Median wall time of ``fn`` [µs] over ``repeats`` calls (after 50 warm-up calls)."""
+    for _ in range(50):
+        fn()
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter_ns()
+        fn()
+        samples.append(time.perf_counter_ns() - t0)
+    return statistics.median(samples) * 1e-3
+
+
+def ik_ticks(states: np.ndarray, targets: np.ndarray, velocities: np.ndarray) -> dict[str, Any]:
+    """The qp solve vs mink.solve_ik on identical problems taken from a nominal run."""
+    scene = load_scene()
+    dt = 0.01
+    fast = QPController(scene, dt, backend="fast")
+    max_diff = 0.0
+    fast_us, mink_us = [], []
+    for q, x, V in zip(states, targets, velocities, strict=True):
+        # Set up the problem exactly as a control tick does, then time only the QP part.
+        kin = fast.kinematics
+        kin.update(q)
+        x_WG = kin.wxyz_xyz()
+        V_cmd = V + fast._K * pose_error_W(x_WG, x)  # feed-forward plus correction
+        fast.set_frame_target(x_WG, V_cmd)
+        a = fast._solve_fast(q)
+        b = mink.solve_ik(fast.configuration, fast.tasks, dt, solver="daqp", limits=fast.limits)
+        if a is None:
+            raise RuntimeError("fast QP found no solution on a nominal-run state")
+        max_diff = max(max_diff, float(np.abs(a - b).max()))
+        fast_us.append(median_us(lambda q=q: fast._solve_fast(q), 30))
+        mink_us.append(
+            median_us(
+                lambda: mink.solve_ik(
+                    fast.configuration, fast.tasks, dt, solver="daqp", limits=fast.limits
+                ),
+                30,
+            )
+        )
+    f, m = statistics.median(fast_us), statistics.median(mink_us)
+    return {
+        "ik_tick_us_qp_fast": f,
+        "ik_tick_us_mink_solve_ik": m,
+        "ik_tick_ratio_vs_mink": f / m,
+        "ik_fast_vs_mink_max_abs_diff": max_diff,
+        "ik_fast_equals_mink_1e-8": max_diff <= 1e-8,
+    }
+
+
+def controller_ticks(q: np.ndarray, x: np.ndarray, V: np.ndarray) -> dict[str, float]:
+    """Whole controller ticks (FK, error, solve, status) of the three controllers."""
+    scene = load_scene()
+    out = {}
+    for name in ("qp", "pinv", "dls"):
+        ctrl = make_controller(name, scene, 0.01)
+        out[f"controller_tick_us_{name}"] = median_us(lambda c=ctrl: c.command(q, x, V))
+    ctrl = make_controller("qp", scene, 0.01)
+    ctrl.kinematics.update(q)
+    J = ctrl.kinematics.J_WG()
+    out["diagnostics_us"] = median_us(lambda: jacobian_health(J))
+    return out
+
+
+def mj_step_us() -> float:
+    """One physics step [µs] with the brick held between the pads (from a nominal run)."""
+    _, _, sim = prepare(RunRequest())
+    grasp_tick = next(
+        round(k.t / sim.dt) for k in sim.task.trajectory.keyframes if k.name == "grip-closed"
+    )
+    for k in range(grasp_tick + 50):
+        sim._tick(k, k * sim.dt)
+        sim.ticks += 1
+    return median_us(lambda: mujoco.mj_step(sim.model, sim.data), 3000)
+
+
+def nominal_run(record: Path | None) -> tuple[float, float, Any]:
+    """Wall time [s] and sim time [s] of the nominal run (optionally recording)."""
+    _, _, sim = prepare(RunRequest(record=record))
+    t0 = time.perf_counter()
+    result = sim.run()
+    wall = time.perf_counter() - t0
+    if not result.success:
+        raise RuntimeError(f"nominal run failed: {result.failure}")
+    return wall, result.sim_time_s, sim
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--trials", type=int, default=8, help="trials per sweep measurement")
+    parser.add_argument("--repeats", type=int, default=3, help="nominal runs per mode")
+    args = parser.parse_args(argv)
+    report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
+
+    # Headless nominal runs, interleaved with recording runs so that both see the same load.
+    headless, recording, sizes = [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(args.repeats):
+            wall, sim_time, sim = nominal_run(None)
+            headless.append(sim_time / wall)
+            rrd = Path(tmp) / f"bench-{i}.rrd"
+            wall, sim_time, _ = nominal_run(rrd)
+            recording.append(sim_time / wall)
+            sizes.append(rrd.stat().st_size / sim_time)
+    log = sim.log
+    n = sim.ticks
+    picks = np.linspace(10, n - 10, 40).astype(int)
+    plan = sim.task.trajectory
+    targets = np.array([plan.pose_wxyz_xyz(log.t[k] - sim.dt) for k in picks])
+    velocities = np.array([plan.spatial_velocity(log.t[k] - sim.dt) for k in picks])
+    states = log.q_cmd[picks - 1]
+    report["realtime_factor_headless"] = statistics.median(headless)
+    report["realtime_factor_recording"] = statistics.median(recording)
+    report["recording_slowdown"] = (
+        report["realtime_factor_headless"] / report["realtime_factor_recording"]
+    )
+    report["rrd_bytes_per_sim_second"] = statistics.median(sizes)
+    report["control_tick_us_median_in_run"] = 1e6 / (report["realtime_factor_headless"] * 100.0)
+    report.update(ik_ticks(states, targets, velocities))
+    report.update(controller_ticks(states[20], targets[20], velocities[20]))
+    report["mj_step_us_holding_brick"] = mj_step_us()
+    report["mj_step_share_of_tick"] = (
+        5 * report["mj_step_us_holding_brick"] / report["control_tick_us_median_in_run"]
+    )
+
+    workers = os.cpu_count() or 1
+    rates = {}
+    for w in sorted({1, workers}):
+        rep = run_sweep(SweepRequest("pick-place-random", "qp", args.trials, 0, w))
+        rates[w] = rep["trials_per_second"]
+        report[f"sweep_trials_per_second_{w}_workers"] = rates[w]
+    report["sweep_speedup_all_workers"] = rates[workers] / rates[1]
+
+    checks = {}
+    for key, (op, target) in TARGETS.items():
+        value = report[key]
+        checks[key] = {
+            "target": f"{op} {target}",
+            "met": value <= target if op == "<=" else value >= target,
+        }
+    report["targets"] = checks
+    if args.json:
+        print(json.dumps(report))
+    else:
+        for key, value in report.items():
+            if key != "targets":
+                shown = f"{value:.4g}" if isinstance(value, float) else str(value)
+                print(f"{key:40s} {shown}")
+        for key, c in checks.items():
+            print(f"target {key:33s} {c['target']:>8s}  {'met' if c['met'] else 'MISSED'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
