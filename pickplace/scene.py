@@ -249,7 +249,9 @@ def _finger_outer_offset(model: mujoco.MjModel, finger_joint: int) -> float:
     extent = 0.0
     for g in range(model.ngeom):
         if model.geom_bodyid[g] == body and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
-            extent = max(extent, float(model.geom_pos[g] @ axis + np.abs(axis) @ model.geom_size[g]))
+            extent = max(
+                extent, float(model.geom_pos[g] @ axis + np.abs(axis) @ model.geom_size[g])
+            )
     return extent
 
 
