@@ -165,9 +165,7 @@ def singular_reach_task(scene: Scene, name: str, seed: int, plan: PlanConfig | N
         Waypoint("line-end", near, w),
     ]
     keyframes = time_keyframes(waypoints, plan)
-    X_WO = brick_on_floor(
-        scene, BrickPlacement(*scene.source_bin.center_W[:2], 0.0), scene.source_bin.floor_top_z
-    )
+    X_WO = brick_on_floor(scene, nominal_placement(scene), scene.source_bin.floor_top_z)
     return Task(
         scenario=name,
         seed=seed,

@@ -18,6 +18,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +72,7 @@ def ik_ticks(states: np.ndarray, targets: np.ndarray, velocities: np.ndarray) ->
         if a is None:
             raise RuntimeError("fast QP found no solution on a nominal-run state")
         max_diff = max(max_diff, float(np.abs(a - b).max()))
-        fast_us.append(median_us(lambda q=q: fast._solve_fast(q), 30))
+        fast_us.append(median_us(partial(fast._solve_fast, q), 30))
         mink_us.append(
             median_us(
                 lambda: mink.solve_ik(
@@ -96,7 +97,7 @@ def controller_ticks(q: np.ndarray, x: np.ndarray, V: np.ndarray) -> dict[str, f
     out = {}
     for name in ("qp", "pinv", "dls"):
         ctrl = make_controller(name, scene, 0.01)
-        out[f"controller_tick_us_{name}"] = median_us(lambda c=ctrl: c.command(q, x, V))
+        out[f"controller_tick_us_{name}"] = median_us(partial(ctrl.command, q, x, V))
     ctrl = make_controller("qp", scene, 0.01)
     ctrl.kinematics.update(q)
     J = ctrl.kinematics.J_WG()

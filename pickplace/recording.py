@@ -1,0 +1,768 @@
+"""Rerun recording of a run: scene geometry, plan, per-tick state, health plots and events.
+
+:class:`Recorder` is a :class:`~pickplace.sim.TickObserver`. It writes to a ``.rrd`` file,
+a viewer it spawns, a viewer at a gRPC URL, or several of them at once. Tick data is never
+logged row by row: it is read from the run's preallocated :class:`~pickplace.sim.TickLog` and
+sent with ``send_columns`` every ``flush_every`` ticks and at the end, each batch followed by a
+flush, so an interrupted run keeps what was sent. The stream is closed in ``on_finish`` (also
+after Ctrl-C), which writes the file's footer.
+
+Timelines: ``sim_time`` (duration, the simulated time at the end of the tick) and ``tick``
+(sequence, the control tick index k). Quaternions are stored xyzw. Lengths in m, angles in
+rad, times in s unless stated.
+
+=================================================  ==========================================
+Entity path                                        Contents
+=================================================  ==========================================
+``world``                                          static: ``ViewCoordinates`` right-hand, z up
+``world/static/<geom>``                            static: geoms of the world body (floor)
+``world/bodies/<body>``                            body pose in world (``Transform3D``): one row
+                                                   per tick for bodies that move (a joint in
+                                                   their chain), static for the others (bins)
+``world/bodies/<body>/<geom>``                     static: visual geom (box, sphere, capsule,
+                                                   cylinder, ellipsoid, plane, mesh) at its
+                                                   local pose in the body
+``world/plan/path``                                static: planned tool path (``LineStrips3D``)
+``world/plan/keyframes/<name>``                    static: keyframe pose with 5 cm axes and a
+                                                   labelled point (keyframes at one position
+                                                   show one label, "pick / settle / ...")
+``world/plan/target_bin``                          static: target bin's free inner volume
+                                                   (green box outline)
+``world/tool/planned``                             per tick: planned tool pose, 12 cm axes
+``world/tool/commanded``                           per tick: FK of the commanded q, 9 cm axes
+``world/tool/actual``                              per tick: simulated tool pose, 6 cm axes
+``world/tool/manipulability_ellipsoid``            per tick: translational velocity ellipsoid
+                                                   at the actual tool (half sizes 0.1·σt [m])
+``plots/kinematics/singular_values``               σ1..σ6 of the 6×7 tool Jacobian
+``plots/kinematics/singular_values_translational`` σt1..σt3 of its 3×7 translational rows
+``plots/kinematics/condition``                     condition number: full, translational
+                                                   (∞ at a singularity is stored as NaN)
+``plots/kinematics/manipulability``                w1..w4 of the full Jacobian
+``plots/kinematics/manipulability_translational``  w1..w4 of the translational Jacobian
+``plots/tracking/position_error``                  |p_actual − p_planned| [m]
+``plots/tracking/orientation_error``               rotation angle actual vs planned [rad]
+``plots/joints/position``                          measured q, 7 joints [rad]
+``plots/joints/position_limits``                   lower and upper limits, 14 constant lines
+``plots/joints/position_normalized``               (q − lower) / (upper − lower), 7 joints
+``plots/joints/position_normalized_limits``        constant lines at 0 and 1
+``plots/joints/speed``                             commanded q̇, 7 joints [rad/s]
+``plots/joints/speed_ratio``                       |q̇_cmd| / v_max, 7 joints
+``plots/joints/speed_ratio_limit``                 constant line at 1 (the speed limit)
+``plots/gripper/width``                            finger gap: commanded, measured [m]
+``plots/gripper/pad_force``                        normal force on the brick: left, right [N]
+``plots/ik/tick_us``                               controller time per tick [µs]
+``plots/ik/status``                                IK status code (0 ok, 1 no-solution,
+                                                   2 stuck, 3 limited)
+``plots/statics/holding_torque``                   joint torques holding the brick, 7 [N·m]
+``events``                                         ``TextLog`` of the run's events and verdict
+``summary``                                        static: JSON summary (``TextDocument``)
+=================================================  ==========================================
+
+Names containing ``/`` (``wsg50/left_pad``) are escaped as one path part (``wsg50\\/left_pad``);
+unnamed bodies and geoms are called ``body<i>`` and ``geom<i>``. The file embeds a blueprint:
+the 3D scene on the left, health, tracking, joint, gripper plots and the event log on the right.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+import mujoco
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from pickplace.controllers import IK_STATUSES
+from pickplace.errors import InvalidInputError, RecordingError
+
+if TYPE_CHECKING:
+    from pickplace.sim import Event, RunResult, Simulation, TickLog
+
+APPLICATION_ID = "pickplace"
+SPAWN_PORT = 9876
+ELLIPSOID_SCALE = 0.1  # half sizes of the manipulability ellipsoid = this · σt [m per m/rad]
+PLANE_EXTENT = 2.0  # half extent drawn for an infinite plane [m]
+BATCH_FLUSH_TIMEOUT_S = 10.0
+CONNECT_TIMEOUT_S = 5.0
+KEYFRAME_MERGE_DISTANCE = 0.01  # keyframes closer than this share one label [m]
+# Default 3D camera: from the front right, above, looking down at both bins [m].
+EYE_POSITION = (1.2, -1.3, 1.05)
+EYE_TARGET = (0.25, -0.3, 0.25)
+
+TOOL_AXES = {"planned": 0.12, "commanded": 0.09, "actual": 0.06}
+JOINT_COLORS = [
+    (0.12, 0.47, 0.71),
+    (1.00, 0.50, 0.05),
+    (0.17, 0.63, 0.17),
+    (0.84, 0.15, 0.16),
+    (0.58, 0.40, 0.74),
+    (0.55, 0.34, 0.29),
+    (0.89, 0.47, 0.76),
+]
+LEVELS = {
+    "info": rr.TextLogLevel.INFO,
+    "warn": rr.TextLogLevel.WARN,
+    "error": rr.TextLogLevel.ERROR,
+}
+
+_GEOM = mujoco.mjtGeom
+_TLC = rrb.encodings.TextLogColumnKind
+_SOLID = rr.components.FillMode.Solid
+
+
+def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:
+    """MuJoCo/mink wxyz quaternions (..., 4) → Rerun xyzw."""
+    return np.asarray(q_wxyz)[..., [1, 2, 3, 0]]
+
+
+def _quat(q_wxyz: np.ndarray) -> rr.Quaternion:
+    """One MuJoCo/mink wxyz quaternion as a Rerun quaternion."""
+    return rr.Quaternion(xyzw=_xyzw(q_wxyz))
+
+
+def _ns(t: np.ndarray) -> np.ndarray:
+    """Seconds → timedelta64[ns], rounded (k·dt sums such as 0.09 + 0.01 land 1 ns short)."""
+    return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype("timedelta64[ns]")
+
+
+def _part(name: str) -> str:
+    return str(rr.escape_entity_path_part(name))
+
+
+def _finite_or_nan(a: np.ndarray) -> np.ndarray:
+    """Copy of ``a`` with ±inf replaced by NaN (drawn as a gap in a plot)."""
+    out = np.array(a, dtype=np.float64)
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
+# Component descriptors of the per-tick columns, taken once from the archetypes: building
+# ComponentColumns from them directly costs a fifth of ``Archetype.columns(...)``.
+_DESCRIPTORS = {
+    c.component_descriptor().component: c.component_descriptor()
+    for c in [
+        *rr.Transform3D.columns(translation=np.zeros((1, 3)), quaternion=np.eye(4)[3:]),
+        *rr.Scalars.columns(scalars=np.zeros(1)),
+    ]
+}
+
+
+def _transform_columns(p: np.ndarray, q_wxyz: np.ndarray) -> list[rr.ComponentColumn]:
+    """Transform3D columns (translation, quaternion), one row per row of ``p`` (T, 3)."""
+    offsets = np.arange(len(p) + 1, dtype=np.int32)
+    return [
+        rr.ComponentColumn(
+            _DESCRIPTORS["Transform3D:translation"],
+            rr.components.Translation3DBatch(p),
+            offsets=offsets,
+        ),
+        rr.ComponentColumn(
+            _DESCRIPTORS["Transform3D:quaternion"],
+            rr.components.RotationQuatBatch(_xyzw(q_wxyz)),
+            offsets=offsets,
+        ),
+    ]
+
+
+def _scalar_columns(values: np.ndarray) -> list[rr.ComponentColumn]:
+    """Scalars column of (T,) or (T, N) values (N lines); ±inf becomes NaN (a gap)."""
+    v = _finite_or_nan(values)
+    width = 1 if v.ndim == 1 else v.shape[1]
+    offsets = np.arange(0, v.size + 1, width, dtype=np.int32)
+    batch = rr.components.ScalarBatch(v.reshape(-1))
+    return [rr.ComponentColumn(_DESCRIPTORS["Scalars:scalars"], batch, offsets=offsets)]
+
+
+def _rotation_quats_xyzw(U: np.ndarray) -> np.ndarray:
+    """Proper-rotation quaternions (T, 4) xyzw from the columns of matrices U (T, 3, 3).
+
+    A reflection (det < 0) gets its last column flipped, which leaves the ellipsoid unchanged;
+    rows that are not finite give the identity.
+    """
+    R = np.array(U, dtype=np.float64).reshape(-1, 3, 3)
+    bad = ~np.all(np.isfinite(R), axis=(1, 2))
+    R[bad] = np.eye(3)
+    flip = np.linalg.det(R) < 0.0
+    R[flip, :, 2] *= -1.0
+    d0, d1, d2 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
+    q = 0.5 * np.sqrt(
+        np.maximum(
+            0.0,
+            np.stack(
+                [1.0 + d0 - d1 - d2, 1.0 - d0 + d1 - d2, 1.0 - d0 - d1 + d2, 1.0 + d0 + d1 + d2], 1
+            ),
+        )
+    )
+    q[:, 0] = np.copysign(q[:, 0], R[:, 2, 1] - R[:, 1, 2])
+    q[:, 1] = np.copysign(q[:, 1], R[:, 0, 2] - R[:, 2, 0])
+    q[:, 2] = np.copysign(q[:, 2], R[:, 1, 0] - R[:, 0, 1])
+    return np.asarray(q / np.linalg.norm(q, axis=1, keepdims=True))
+
+
+def _vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted per-vertex normals of a triangle mesh."""
+    normals = np.zeros_like(verts)
+    a, b, c = verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]]
+    face_n = np.cross(b - a, c - a)
+    for k in range(3):
+        np.add.at(normals, faces[:, k], face_n)
+    norm = np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals / np.where(norm > 0.0, norm, 1.0)
+
+
+def geom_archetype(model: mujoco.MjModel, g: int, rgba: np.ndarray) -> Any | None:
+    """Rerun shape of geom ``g`` in its own frame, or None for an unsupported type."""
+    typ = int(model.geom_type[g])
+    s = model.geom_size[g]
+    color = [rgba]
+    if typ == _GEOM.mjGEOM_BOX:
+        return rr.Boxes3D(half_sizes=[s], colors=color, fill_mode=_SOLID)
+    if typ == _GEOM.mjGEOM_SPHERE:
+        return rr.Ellipsoids3D(half_sizes=[[s[0]] * 3], colors=color, fill_mode=_SOLID)
+    if typ == _GEOM.mjGEOM_ELLIPSOID:
+        return rr.Ellipsoids3D(half_sizes=[s], colors=color, fill_mode=_SOLID)
+    if typ == _GEOM.mjGEOM_CAPSULE:
+        # Rerun's capsule runs from its origin along +z; MuJoCo's is centred.
+        return rr.Capsules3D(
+            lengths=[2.0 * s[1]],
+            radii=[s[0]],
+            translations=[[0.0, 0.0, -s[1]]],
+            colors=color,
+            fill_mode=_SOLID,
+        )
+    if typ == _GEOM.mjGEOM_CYLINDER:
+        return rr.Cylinders3D(lengths=[2.0 * s[1]], radii=[s[0]], colors=color, fill_mode=_SOLID)
+    if typ == _GEOM.mjGEOM_PLANE:
+        hx = s[0] if s[0] > 0 else PLANE_EXTENT
+        hy = s[1] if s[1] > 0 else PLANE_EXTENT
+        corners = [[-hx, -hy, 0.0], [hx, -hy, 0.0], [hx, hy, 0.0], [-hx, hy, 0.0]]
+        return rr.Mesh3D(
+            vertex_positions=corners,
+            triangle_indices=[[0, 1, 2], [0, 2, 3]],
+            vertex_normals=[[0.0, 0.0, 1.0]] * 4,
+            albedo_factor=rgba,
+        )
+    if typ == _GEOM.mjGEOM_MESH and model.geom_dataid[g] >= 0:
+        m = int(model.geom_dataid[g])
+        va, vn = int(model.mesh_vertadr[m]), int(model.mesh_vertnum[m])
+        fa, fn = int(model.mesh_faceadr[m]), int(model.mesh_facenum[m])
+        verts = np.array(model.mesh_vert[va : va + vn], dtype=np.float64)
+        faces = np.array(model.mesh_face[fa : fa + fn], dtype=np.int64)
+        return rr.Mesh3D(
+            vertex_positions=verts,
+            triangle_indices=faces,
+            vertex_normals=_vertex_normals(verts, faces),
+            albedo_factor=rgba,
+        )
+    return None
+
+
+def geom_rgba(model: mujoco.MjModel, g: int) -> np.ndarray:
+    """Colour of geom ``g``: its material's when it has one, else ``geom_rgba``."""
+    mat = int(model.geom_matid[g])
+    return np.array(model.mat_rgba[mat] if mat >= 0 else model.geom_rgba[g], dtype=np.float64)
+
+
+def _names(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int, prefix: str) -> list[str]:
+    return [mujoco.mj_id2name(model, obj, i) or f"{prefix}{i}" for i in range(count)]
+
+
+def _series(names: list[str], colors: list[Any] | None = None, width: float = 1.5) -> Any:
+    """Static line style of a plot entity: one name (and colour) per value of a row."""
+    if colors is None:
+        colors = [JOINT_COLORS[i % len(JOINT_COLORS)] for i in range(len(names))]
+    return rr.SeriesLines(names=names, colors=colors, widths=[width] * len(names))
+
+
+def build_blueprint() -> rrb.Blueprint:
+    """3D scene left (3/5 of the width); plots and the event log right."""
+
+    def ts(name: str, origin: str, contents: list[str] | None = None, **kw: Any) -> Any:
+        if contents is None:
+            return rrb.TimeSeriesView(name=name, origin=origin, **kw)
+        return rrb.TimeSeriesView(name=name, origin="/", contents=contents, **kw)
+
+    legend = rrb.PlotLegend(visible=False)
+    right = rrb.Vertical(
+        rrb.Tabs(
+            ts("Singular values", "plots/kinematics/singular_values", plot_legend=legend),
+            ts(
+                "Translational σ",
+                "plots/kinematics/singular_values_translational",
+                plot_legend=legend,
+            ),
+            ts("Condition", "plots/kinematics/condition"),
+            ts("Manipulability", "plots/kinematics/manipulability"),
+            ts("Manipulability (transl.)", "plots/kinematics/manipulability_translational"),
+            name="Kinematic health",
+        ),
+        rrb.Tabs(
+            ts("Position error [m]", "plots/tracking/position_error"),
+            ts("Orientation error [rad]", "plots/tracking/orientation_error"),
+            name="Tracking",
+        ),
+        rrb.Tabs(
+            ts(
+                "Joint position (normalised)",
+                "",
+                ["plots/joints/position_normalized", "plots/joints/position_normalized_limits"],
+                plot_legend=legend,
+            ),
+            ts(
+                "Joint speed / limit",
+                "",
+                ["plots/joints/speed_ratio", "plots/joints/speed_ratio_limit"],
+                plot_legend=legend,
+            ),
+            ts(
+                "Joint position [rad]",
+                "",
+                ["plots/joints/position", "plots/joints/position_limits"],
+                plot_legend=legend,
+            ),
+            ts("Joint speed [rad/s]", "plots/joints/speed"),
+            ts("Holding torque [N·m]", "plots/statics/holding_torque"),
+            name="Joints",
+        ),
+        rrb.Tabs(
+            ts("Gripper width [m]", "plots/gripper/width"),
+            ts("Pad force [N]", "plots/gripper/pad_force"),
+            ts("IK time [µs]", "plots/ik/tick_us"),
+            ts(
+                "IK status",
+                "plots/ik/status",
+                axis_y=rrb.ScalarAxis(range=(-0.2, len(IK_STATUSES) - 0.8)),
+            ),
+            name="Gripper / IK",
+        ),
+        rrb.Tabs(
+            rrb.TextLogView(
+                name="Events",
+                origin="events",
+                columns=rrb.archetypes.TextLogColumns(
+                    text_log_columns=[
+                        rrb.encodings.TextLogColumn(kind, visible=kind != _TLC.EntityPath)
+                        for kind in (_TLC.LogLevel, _TLC.Body, _TLC.EntityPath)
+                    ]
+                ),
+            ),
+            rrb.TextDocumentView(name="Summary", origin="summary"),
+            name="Events",
+        ),
+        row_shares=[1.0, 1.0, 1.0, 1.0, 1.2],
+    )
+    scene = rrb.Spatial3DView(
+        name="Scene",
+        origin="world",
+        eye_controls=rrb.EyeControls3D(
+            position=EYE_POSITION, look_target=EYE_TARGET, eye_up=[0.0, 0.0, 1.0]
+        ),
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(scene, right, column_shares=[3.0, 2.0]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="expanded", timeline="sim_time"),
+    )
+
+
+class Recorder:
+    """Record a :class:`~pickplace.sim.Simulation` to Rerun (see the module docstring).
+
+    One recorder records one run. The sinks are opened here, so a bad path fails before the
+    simulation starts.
+
+    Args:
+        path: ``.rrd`` file to write, or None.
+        recording_id: Recording id, e.g. ``pick-place/qp/seed-0``.
+        spawn: Also spawn a Rerun viewer and stream to it.
+        connect: Also stream to a viewer at this gRPC URL
+            (e.g. ``rerun+http://127.0.0.1:9876/proxy``).
+        flush_every: Ticks per ``send_columns`` batch (each batch is flushed).
+
+    Raises:
+        RecordingError: No sink was given or a sink cannot be opened.
+        InvalidInputError: ``flush_every`` is not a positive integer.
+    """
+
+    def __init__(
+        self,
+        path: Path | None,
+        *,
+        recording_id: str,
+        spawn: bool = False,
+        connect: str | None = None,
+        flush_every: int = 100,
+    ) -> None:
+        if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 1:
+            raise InvalidInputError(f"flush_every must be an integer >= 1, got {flush_every!r}")
+        if path is None and not spawn and connect is None:
+            raise RecordingError("a recording needs a file path, spawn=True or a connect URL")
+        self.path = Path(path) if path is not None else None
+        self.recording_id = recording_id
+        self.flush_every = flush_every
+        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+        self.rec.set_log_time_enabled(False)
+        self.rec.set_log_tick_enabled(False)
+        self._closed = False
+        self._failed = False
+        self._started = False
+        self._sent = 0  # ticks already sent
+        self._verdict_logged = False
+        self._moving: list[tuple[int, str]] = []  # (body id, entity path)
+        self._ik_status_names = ", ".join(f"{i} {s}" for i, s in enumerate(IK_STATUSES))
+        sinks: list[Any] = []
+        where: list[str] = []
+        try:
+            if self.path is not None:
+                where.append(f"file '{self.path}'")
+                sinks.append(rr.FileSink(str(self.path)))
+            if spawn:
+                where.append(f"spawned viewer on port {SPAWN_PORT}")
+                rr.spawn(port=SPAWN_PORT, connect=False, recording=self.rec)
+                sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{SPAWN_PORT}/proxy"))
+            if connect is not None:
+                where.append(f"viewer at '{connect}'")
+                sinks.append(rr.GrpcSink(connect))
+            self.rec.set_sinks(*sinks, default_blueprint=build_blueprint())
+        except (RuntimeError, OSError, ValueError) as exc:
+            self._closed = True
+            raise RecordingError(
+                f"cannot open the recording sink ({'; '.join(where)}): {exc}"
+            ) from exc
+        self._where = "; ".join(where)
+        if spawn or connect is not None:
+            # A viewer that is not there would otherwise only show up mid-run.
+            try:
+                self.rec.flush(timeout_sec=CONNECT_TIMEOUT_S)
+            except RuntimeError as exc:
+                self._abort()
+                if self.path is not None:
+                    self.path.unlink(missing_ok=True)  # the empty file this created
+                hint = (
+                    "did the spawned viewer start? It needs a display"
+                    if spawn
+                    else "is a viewer running there? Start one with `rerun`"
+                )
+                raise RecordingError(
+                    f"cannot reach the Rerun viewer ({self._where}) within "
+                    f"{CONNECT_TIMEOUT_S:.0f} s: {exc} ({hint})"
+                ) from exc
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        """True once the stream has been closed (the file is complete)."""
+        return self._closed
+
+    def close(self) -> None:
+        """Flush and close the stream, writing the file footer. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if not self._failed:
+                self.rec.flush(timeout_sec=BATCH_FLUSH_TIMEOUT_S)
+        except RuntimeError:
+            pass  # a viewer that went away must not keep the file from being closed
+        finally:
+            self.rec.disconnect()
+
+    def _abort(self) -> None:
+        """Close after a sink failed, without waiting for it again."""
+        self._failed = True
+        self.close()
+
+    def _flush(self) -> None:
+        try:
+            self.rec.flush(timeout_sec=BATCH_FLUSH_TIMEOUT_S)
+        except RuntimeError as exc:
+            self._abort()
+            raise RecordingError(
+                f"cannot write the recording ({self._where}): {exc}; the recording was closed"
+            ) from exc
+
+    # ------------------------------------------------------------------ observer
+
+    def on_start(self, run: Simulation) -> None:
+        """Log the static scene, plan and plot styles."""
+        if self._closed:
+            raise RecordingError("the recorder is closed; use one Recorder per run")
+        self._started = True
+        self._log_scene(run)
+        self._log_plan(run)
+        self._log_styles(run)
+        self._flush()
+
+    def on_tick(self, run: Simulation, tick: int) -> None:
+        """Send a batch every ``flush_every`` ticks."""
+        if tick + 1 - self._sent >= self.flush_every and not self._closed:
+            self._send(run, tick + 1)
+            self._flush()
+
+    def on_event(self, run: Simulation, event: Event) -> None:
+        """Log the event at its tick (events are rare: plain ``log``)."""
+        if self._closed:
+            return
+        self._log_event(event.tick, event.t, event.level, event.text)
+        if event.kind == "verdict":
+            self._verdict_logged = True
+
+    def on_finish(self, run: Simulation, result: RunResult) -> None:
+        """Send the rest of the log, the summary and the verdict, then close the stream."""
+        if self._closed:
+            return
+        try:
+            if self._started:
+                self._send(run, min(int(run.ticks), len(run.log.t)))
+            summary = result.summary()
+            if summary.get("recording") is None and self.path is not None:
+                summary["recording"] = str(self.path)
+            text = json.dumps(summary, indent=2, default=str)
+            self.rec.log(
+                "summary",
+                rr.TextDocument(f"```json\n{text}\n```", media_type=rr.MediaType.MARKDOWN),
+                static=True,
+            )
+            if not self._verdict_logged:
+                verdict = "success" if result.success else f"failure: {result.failure}"
+                level = "info" if result.success else "error"
+                self._log_event(result.ticks, result.sim_time_s, level, f"verdict: {verdict}")
+                self._verdict_logged = True
+        finally:
+            self.close()
+
+    # ------------------------------------------------------------------ static content
+
+    def _log_scene(self, run: Simulation) -> None:
+        model, data, rec = run.model, run.data, self.rec
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        bodies = _names(model, mujoco.mjtObj.mjOBJ_BODY, model.nbody, "body")
+        geoms = _names(model, mujoco.mjtObj.mjOBJ_GEOM, model.ngeom, "geom")
+        body_paths = ["world/static"] + [f"world/bodies/{_part(n)}" for n in bodies[1:]]
+        used: set[int] = set()
+        for g in range(model.ngeom):
+            rgba = geom_rgba(model, g)
+            if model.geom_group[g] > 2 or rgba[3] <= 0.0:
+                continue
+            shape = geom_archetype(model, g, rgba)
+            if shape is None:
+                continue
+            b = int(model.geom_bodyid[g])
+            used.add(b)
+            path = f"{body_paths[b]}/{_part(geoms[g])}"
+            pose = rr.Transform3D(
+                translation=model.geom_pos[g], quaternion=_quat(model.geom_quat[g])
+            )
+            rec.log(path, pose, shape, static=True)
+        self._moving = []
+        for b in range(1, model.nbody):
+            if model.body_weldid[b] != 0:
+                self._moving.append((b, body_paths[b]))
+            elif b in used:
+                pose = rr.Transform3D(translation=data.xpos[b], quaternion=_quat(data.xquat[b]))
+                rec.log(body_paths[b], pose, static=True)
+        for name, length in TOOL_AXES.items():
+            rec.log(f"world/tool/{name}", rr.TransformAxes3D(length), static=True)
+        rec.log(
+            "world/tool/manipulability_ellipsoid",
+            rr.Ellipsoids3D.from_fields(
+                colors=[[0.2, 0.6, 1.0, 0.25]], fill_mode=_SOLID, line_radii=[0.0005]
+            ),
+            static=True,
+        )
+
+    def _log_plan(self, run: Simulation) -> None:
+        rec, traj = self.rec, run.task.trajectory
+        path = traj.sample_path(400)
+        rec.log(
+            "world/plan/path",
+            rr.LineStrips3D([path], colors=[[0.1, 0.75, 0.95]], radii=[0.003]),
+            static=True,
+        )
+        # Keyframes at one position (pick, settle, grip-closed) would print their labels on top
+        # of each other: the first of such a group shows all the names, the others none.
+        names: list[str] = []
+        for i, kf in enumerate(traj.keyframes):
+            names.append(kf.name if kf.name not in names else f"{kf.name}-{i}")
+        poses = [np.asarray(kf.X_WG.wxyz_xyz) for kf in traj.keyframes]
+        leader = list(range(len(poses)))
+        for i in range(len(poses)):
+            for j in range(i):
+                if np.linalg.norm(poses[i][4:] - poses[j][4:]) < KEYFRAME_MERGE_DISTANCE:
+                    leader[i] = leader[j]
+                    break
+        for i, (name, wxyz_xyz) in enumerate(zip(names, poses, strict=True)):
+            group = [names[j] for j in range(len(names)) if leader[j] == i]
+            rec.log(
+                f"world/plan/keyframes/{_part(name)}",
+                rr.Transform3D(translation=wxyz_xyz[4:], quaternion=_quat(wxyz_xyz[:4])),
+                rr.TransformAxes3D(0.05),
+                rr.Points3D(
+                    [[0.0, 0.0, 0.0]],
+                    radii=[0.008],
+                    colors=[[1.0, 0.85, 0.1]],
+                    labels=[" / ".join(group) if group else name],
+                    show_labels=bool(group),
+                ),
+                static=True,
+            )
+        bin_ = run.scene.target_bin
+        height = bin_.wall_top_z - bin_.floor_top_z
+        center = bin_.center_W + np.array([0.0, 0.0, 0.5 * height])
+        half = [bin_.inner_half_extents[0], bin_.inner_half_extents[1], 0.5 * height]
+        rec.log(
+            "world/plan/target_bin",
+            rr.Boxes3D(
+                half_sizes=[half],
+                centers=[center],
+                quaternions=[_xyzw(bin_.X_WB.rotation().wxyz)],
+                colors=[[0.1, 0.85, 0.2]],
+                radii=[0.003],
+                labels=[f"target: {bin_.name}"],
+                show_labels=False,  # the keyframe labels above it say enough
+            ),
+            static=True,
+        )
+
+    def _log_styles(self, run: Simulation) -> None:
+        rec, sc = self.rec, run.scene
+        joints = list(sc.arm_joint_names)
+        static: list[tuple[str, Any]] = [
+            ("plots/kinematics/singular_values", _series([f"σ{i}" for i in range(1, 7)])),
+            (
+                "plots/kinematics/singular_values_translational",
+                _series(["σt1", "σt2", "σt3"]),
+            ),
+            ("plots/kinematics/condition", _series(["full", "translational"])),
+            ("plots/kinematics/manipulability", _series(["w1", "w2", "w3", "w4"])),
+            ("plots/kinematics/manipulability_translational", _series(["w1", "w2", "w3", "w4"])),
+            ("plots/tracking/position_error", _series(["position error [m]"])),
+            ("plots/tracking/orientation_error", _series(["orientation error [rad]"])),
+            ("plots/joints/position", _series(joints, JOINT_COLORS)),
+            (
+                "plots/joints/position_limits",
+                _series(
+                    [f"{j} lower" for j in joints] + [f"{j} upper" for j in joints],
+                    [(*c, 0.45) for c in JOINT_COLORS] * 2,
+                    width=1.0,
+                ),
+            ),
+            ("plots/joints/position_normalized", _series(joints, JOINT_COLORS)),
+            (
+                "plots/joints/position_normalized_limits",
+                _series(["lower limit", "upper limit"], [(0.9, 0.1, 0.1)] * 2, width=2.0),
+            ),
+            ("plots/joints/speed", _series(joints, JOINT_COLORS)),
+            ("plots/joints/speed_ratio", _series(joints, JOINT_COLORS)),
+            ("plots/joints/speed_ratio_limit", _series(["limit"], [(0.9, 0.1, 0.1)], width=2.0)),
+            ("plots/gripper/width", _series(["commanded", "measured"])),
+            ("plots/gripper/pad_force", _series(["left", "right"])),
+            ("plots/ik/tick_us", _series(["IK time [µs]"])),
+            ("plots/ik/status", _series([f"status ({self._ik_status_names})"])),
+            ("plots/statics/holding_torque", _series(joints, JOINT_COLORS)),
+        ]
+        for path, arch in static:
+            rec.log(path, arch, static=True)
+        self._q_lo = np.asarray(sc.q_min, dtype=np.float64)
+        self._q_span = np.asarray(sc.q_max, dtype=np.float64) - self._q_lo
+        self._q_limits = np.concatenate([sc.q_min, sc.q_max]).astype(np.float64)
+        self._v_max = np.asarray(sc.v_max, dtype=np.float64)
+
+    # ------------------------------------------------------------------ tick data
+
+    def _log_event(self, tick: int, t: float, level: str, text: str) -> None:
+        self.rec.set_time("sim_time", duration=_ns(np.array([t]))[0])
+        self.rec.set_time("tick", sequence=int(tick))
+        self.rec.log("events", rr.TextLog(text, level=LEVELS.get(level, rr.TextLogLevel.INFO)))
+
+    def _send(self, run: Simulation, end: int) -> None:
+        """Send rows ``[self._sent, end)`` of ``run.log`` as columns."""
+        start = self._sent
+        if end <= start:
+            return
+        self._sent = end
+        log: TickLog = run.log
+        sl = slice(start, end)
+        times = [
+            rr.TimeColumn("sim_time", duration=_ns(log.t[sl])),
+            rr.TimeColumn("tick", sequence=np.arange(start, end, dtype=np.int64)),
+        ]
+        send = self.rec.send_columns
+
+        for b, path in self._moving:
+            send(path, times, _transform_columns(log.body_pos[sl, b], log.body_quat[sl, b]))
+        send(
+            "world/tool/planned", times, _transform_columns(log.p_WG_plan[sl], log.quat_WG_plan[sl])
+        )
+        send(
+            "world/tool/commanded", times, _transform_columns(log.p_WG_cmd[sl], log.quat_WG_cmd[sl])
+        )
+        send("world/tool/actual", times, _transform_columns(log.p_WG[sl], log.quat_WG[sl]))
+
+        half = ELLIPSOID_SCALE * log.sigma_t[sl]
+        half[~np.isfinite(half)] = 0.0
+        send(
+            "world/tool/manipulability_ellipsoid",
+            times,
+            rr.Ellipsoids3D.columns(
+                half_sizes=half, centers=log.p_WG[sl], quaternions=_rotation_quats_xyzw(log.U_t[sl])
+            ),
+        )
+
+        q = log.q[sl]
+        plots: list[tuple[str, np.ndarray]] = [
+            ("plots/kinematics/singular_values", log.sigma[sl]),
+            ("plots/kinematics/singular_values_translational", log.sigma_t[sl]),
+            (
+                "plots/kinematics/condition",
+                np.column_stack([log.condition[sl], log.condition_t[sl]]),
+            ),
+            ("plots/kinematics/manipulability", log.manipulability[sl]),
+            ("plots/kinematics/manipulability_translational", log.manipulability_t[sl]),
+            ("plots/tracking/position_error", log.position_error[sl]),
+            ("plots/tracking/orientation_error", log.orientation_error[sl]),
+            ("plots/joints/position", q),
+            ("plots/joints/position_normalized", (q - self._q_lo) / self._q_span),
+            ("plots/joints/speed", log.qdot_cmd[sl]),
+            ("plots/joints/speed_ratio", np.abs(log.qdot_cmd[sl]) / self._v_max),
+            ("plots/gripper/width", np.column_stack([log.gripper_cmd[sl], log.gripper_gap[sl]])),
+            ("plots/gripper/pad_force", log.pad_force[sl]),
+            ("plots/ik/tick_us", log.ik_us[sl]),
+            ("plots/ik/status", log.ik_status[sl]),
+            ("plots/statics/holding_torque", log.holding_torque[sl]),
+        ]
+        for path, values in plots:
+            send(path, times, _scalar_columns(values))
+
+        # Constant limit lines: two rows per batch (its first and last tick).
+        ends = [start, end - 1] if end - start > 1 else [start]
+        times = [
+            rr.TimeColumn("sim_time", duration=_ns(log.t[ends])),
+            rr.TimeColumn("tick", sequence=np.asarray(ends, dtype=np.int64)),
+        ]
+        m = len(ends)
+        send(
+            "plots/joints/position_limits", times, _scalar_columns(np.tile(self._q_limits, (m, 1)))
+        )
+        send(
+            "plots/joints/position_normalized_limits",
+            times,
+            _scalar_columns(np.tile([0.0, 1.0], (m, 1))),
+        )
+        send("plots/joints/speed_ratio_limit", times, _scalar_columns(np.ones(m)))

@@ -1,0 +1,345 @@
+"""The Rerun recording of a real run, read back from the .rrd file."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from pickplace.controllers import make_controller
+from pickplace.errors import InvalidInputError, RecordingError
+from pickplace.recording import Recorder, _rotation_quats_xyzw
+from pickplace.scenarios import get_scenario
+from pickplace.scene import Scene, load_scene
+from pickplace.sim import RunResult, Simulation
+
+RECORDING_ID = "pick-place/qp/seed-0"
+
+
+@dataclass
+class Entity:
+    """Everything logged at one entity: static components and temporal rows."""
+
+    static: dict[str, Any] = field(default_factory=dict)
+    rows: dict[str, list[Any]] = field(default_factory=lambda: defaultdict(list))
+
+    def n_rows(self, column: str) -> int:
+        return len(self.rows[column])
+
+
+@dataclass
+class Recording:
+    path: Path
+    result: RunResult
+    scene: Scene
+    reader: RrdReader
+    entities: dict[str, Entity]
+
+
+def read_entities(path: Path) -> dict[str, Entity]:
+    """Entity path (without the leading '/') → its static components and temporal rows."""
+    entities: dict[str, Entity] = defaultdict(Entity)
+    for chunk in RrdReader(path).store().stream():
+        entity = entities[chunk.entity_path.lstrip("/")]
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if name == "rerun.controls.RowId":
+                continue
+            column = batch.column(name)
+            if name == "sim_time":
+                column = column.cast("int64")  # duration[ns]
+            values = column.to_pylist()
+            if chunk.is_static:
+                entity.static[name] = values[-1]
+            else:
+                entity.rows[name].extend(values)
+    # Temporal chunks of one entity may arrive in any order: sort every column by tick.
+    for entity in entities.values():
+        ticks = entity.rows.get("tick")
+        if ticks:
+            order = np.argsort(ticks, kind="stable")
+            for name, values in entity.rows.items():
+                if len(values) == len(order):
+                    entity.rows[name] = [values[i] for i in order]
+    return dict(entities)
+
+
+def run_recorded(path: Path, *, stop_at: int | None = None) -> tuple[RunResult, Scene]:
+    scene = load_scene()
+    task = get_scenario("pick-place").build(scene, "pick-place", 0, None)
+    controller = make_controller("qp", scene, 0.01)
+    observers: list[Any] = []
+    if stop_at is not None:
+        observers.append(_CtrlC(stop_at))
+    observers.append(Recorder(path, recording_id=RECORDING_ID, flush_every=100))
+    result = Simulation(scene, task, controller, observers=observers).run()
+    return result, scene
+
+
+class _CtrlC:
+    """Observer that presses Ctrl-C at a given tick."""
+
+    def __init__(self, tick: int) -> None:
+        self.tick = tick
+
+    def on_start(self, run: Simulation) -> None:
+        pass
+
+    def on_tick(self, run: Simulation, tick: int) -> None:
+        if tick == self.tick:
+            raise KeyboardInterrupt
+
+    def on_event(self, run: Simulation, event: Any) -> None:
+        pass
+
+    def on_finish(self, run: Simulation, result: RunResult) -> None:
+        pass
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Recording:
+    path = tmp_path_factory.mktemp("rec") / "nominal.rrd"
+    result, scene = run_recorded(path)
+    assert result.success, result.summary()
+    return Recording(path, result, scene, RrdReader(path), read_entities(path))
+
+
+def body_path(name: str) -> str:
+    return f"world/bodies/{rr.escape_entity_path_part(name)}"
+
+
+# ---------------------------------------------------------------------------- file
+
+
+def test_application_and_recording_id(recording: Recording) -> None:
+    stores = recording.reader.recordings()
+    assert len(stores) == 1
+    assert stores[0].application_id == "pickplace"
+    assert stores[0].recording_id == RECORDING_ID
+
+
+def test_blueprint_is_embedded(recording: Recording) -> None:
+    assert recording.reader.blueprints()
+
+
+def test_world_is_z_up_and_has_the_scene_geometry(recording: Recording) -> None:
+    ents = recording.entities
+    assert "world" in ents and ents["world"].static  # ViewCoordinates
+    for path in (
+        "world/static/floor",
+        f"{body_path('bin1')}/bin1_floor",
+        f"{body_path('bin2')}/bin2_wall_px",
+        f"{body_path('brick')}/brick",
+        f"{body_path('link7')}/link7_visual",
+        f"{body_path('wsg50/left_finger')}/{rr.escape_entity_path_part('wsg50/left_pad_visual')}",
+    ):
+        assert path in ents, path
+        assert any(k.endswith(":translation") for k in ents[path].static), path
+    # Collision geoms (group 3) are not drawn.
+    assert f"{body_path('link7')}/link7_collision" not in ents
+    brick_color = ents[f"{body_path('brick')}/brick"].static["Boxes3D:colors"]
+    assert brick_color == [0xCC1A1AFF]  # rgba (0.8, 0.1, 0.1, 1)
+
+
+def test_bins_are_static_bodies(recording: Recording) -> None:
+    bin2 = recording.entities[body_path("bin2")]
+    assert bin2.static["Transform3D:translation"][0] == pytest.approx([0.55, 0.0, 0.0], abs=1e-7)
+    assert not bin2.rows
+
+
+def test_plan_is_recorded(recording: Recording) -> None:
+    ents = recording.entities
+    strip = ents["world/plan/path"].static["LineStrips3D:strips"]
+    assert len(strip) == 1 and len(strip[0]) == 400
+    names = [
+        kf.name
+        for kf in get_scenario("pick-place")
+        .build(recording.scene, "pick-place", 0, None)
+        .trajectory.keyframes
+    ]
+    shown = []
+    for name in names:
+        kf = ents[f"world/plan/keyframes/{name}"].static
+        (label,) = kf["Points3D:labels"]
+        assert name in label.split(" / ")
+        if kf["Points3D:show_labels"] == [True]:
+            shown.extend(label.split(" / "))
+        assert kf["TransformAxes3D:axis_length"] == [pytest.approx(0.05)]
+    assert sorted(shown) == sorted(names)  # each name printed once
+    assert "Boxes3D:half_sizes" in ents["world/plan/target_bin"].static
+
+
+# ---------------------------------------------------------------------------- per tick
+
+
+@pytest.mark.parametrize("body", ["link7", "brick", "wsg50/left_finger"])
+def test_moving_bodies_have_one_transform_per_tick(recording: Recording, body: str) -> None:
+    ent = recording.entities[body_path(body)]
+    ticks = recording.result.ticks
+    assert ent.rows["tick"] == list(range(ticks))
+    assert ent.n_rows("Transform3D:translation") == ticks
+    assert ent.n_rows("Transform3D:quaternion") == ticks
+    assert ent.n_rows("sim_time") == ticks
+
+
+def test_brick_transform_ends_where_the_run_says(recording: Recording) -> None:
+    ent = recording.entities[body_path("brick")]
+    final = ent.rows["Transform3D:translation"][-1][0]
+    np.testing.assert_allclose(final, recording.result.brick_final_xyz, atol=1e-6)  # float32
+    q = np.array(ent.rows["Transform3D:quaternion"][-1][0])
+    assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-6)
+
+
+def test_tool_frames_and_ellipsoid_per_tick(recording: Recording) -> None:
+    ents, ticks = recording.entities, recording.result.ticks
+    lengths = set()
+    for name in ("planned", "commanded", "actual"):
+        ent = ents[f"world/tool/{name}"]
+        assert ent.n_rows("Transform3D:translation") == ticks
+        lengths.add(ent.static["TransformAxes3D:axis_length"][0])
+    assert len(lengths) == 3  # distinguishable triads
+    ell = ents["world/tool/manipulability_ellipsoid"]
+    assert ell.n_rows("Ellipsoids3D:half_sizes") == ticks
+    assert "Ellipsoids3D:half_sizes" not in ell.static  # static would hide the temporal rows
+    q = np.array([row[0] for row in ell.rows["Ellipsoids3D:quaternions"]])
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
+
+
+def test_singular_values(recording: Recording) -> None:
+    ent = recording.entities["plots/kinematics/singular_values"]
+    rows = ent.rows["Scalars:scalars"]
+    assert len(rows) == recording.result.ticks
+    assert all(len(r) == 6 for r in rows)
+    assert ent.static["SeriesLines:names"] == [f"σ{i}" for i in range(1, 7)]
+    smin = min(min(r) for r in rows)
+    assert smin == pytest.approx(recording.result.summary()["min_singular_value"], abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("path", "width"),
+    [
+        ("plots/kinematics/singular_values_translational", 3),
+        ("plots/kinematics/condition", 2),
+        ("plots/kinematics/manipulability", 4),
+        ("plots/kinematics/manipulability_translational", 4),
+        ("plots/tracking/position_error", 1),
+        ("plots/tracking/orientation_error", 1),
+        ("plots/joints/position", 7),
+        ("plots/joints/position_normalized", 7),
+        ("plots/joints/speed", 7),
+        ("plots/joints/speed_ratio", 7),
+        ("plots/gripper/width", 2),
+        ("plots/gripper/pad_force", 2),
+        ("plots/ik/tick_us", 1),
+        ("plots/ik/status", 1),
+        ("plots/statics/holding_torque", 7),
+    ],
+)
+def test_plot_has_one_row_per_tick(recording: Recording, path: str, width: int) -> None:
+    ent = recording.entities[path]
+    rows = ent.rows["Scalars:scalars"]
+    assert len(rows) == recording.result.ticks
+    assert {len(r) for r in rows} == {width}
+    assert len(ent.static["SeriesLines:names"]) == width
+
+
+def test_joint_limit_series(recording: Recording) -> None:
+    ents, sc = recording.entities, recording.scene
+    limits = ents["plots/joints/position_limits"].rows["Scalars:scalars"]
+    assert len(limits) >= 2
+    expected = np.concatenate([sc.q_min, sc.q_max])
+    for row in limits:
+        np.testing.assert_allclose(row, expected)
+    # The constant lines span the whole run.
+    t = ents["plots/joints/position_limits"].rows["tick"]
+    assert min(t) == 0 and max(t) == recording.result.ticks - 1
+    normalized = np.array(ents["plots/joints/position_normalized"].rows["Scalars:scalars"])
+    assert normalized.min() >= 0.0 and normalized.max() <= 1.0
+    for row in ents["plots/joints/position_normalized_limits"].rows["Scalars:scalars"]:
+        assert row == [0.0, 1.0]
+    for row in ents["plots/joints/speed_ratio_limit"].rows["Scalars:scalars"]:
+        assert row == [1.0]
+    ratio = np.array(ents["plots/joints/speed_ratio"].rows["Scalars:scalars"])
+    assert ratio.max() == pytest.approx(recording.result.summary()["max_joint_speed_ratio"])
+
+
+def test_events_and_verdict(recording: Recording) -> None:
+    ent = recording.entities["events"]
+    texts = [row[0] for row in ent.rows["TextLog:text"]]
+    assert texts == [e.text for e in recording.result.events]
+    assert texts.count("verdict: success") == 1
+    assert ent.rows["TextLog:level"][-1] == ["INFO"]
+    grasp = texts.index(next(t for t in texts if t.startswith("grip closed")))
+    event = recording.result.events[grasp]
+    assert ent.rows["tick"][grasp] == event.tick
+
+
+def test_summary_document(recording: Recording) -> None:
+    (text,) = recording.entities["summary"].static["TextDocument:text"]
+    body = text.strip().removeprefix("```json").removesuffix("```")
+    summary = json.loads(body)
+    assert summary["success"] is True
+    assert summary["ticks"] == recording.result.ticks
+    assert summary["recording"] == str(recording.path)
+
+
+# ---------------------------------------------------------------------------- robustness
+
+
+def test_interrupted_run_is_complete_and_readable(tmp_path: Path) -> None:
+    path = tmp_path / "interrupted.rrd"
+    result, _ = run_recorded(path, stop_at=150)
+    assert result.failure == "interrupted"
+    assert result.ticks == 150
+    ents = read_entities(path)  # the footer is there: store() works
+    assert ents[body_path("link7")].n_rows("Transform3D:translation") == 150
+    assert ents["plots/kinematics/singular_values"].n_rows("Scalars:scalars") == 150
+    assert ents["events"].rows["TextLog:text"][-1] == ["interrupted by the user"]
+    assert "TextDocument:text" in ents["summary"].static
+
+
+def test_interrupt_before_the_first_tick(tmp_path: Path) -> None:
+    path = tmp_path / "at-once.rrd"
+    result, _ = run_recorded(path, stop_at=0)
+    assert result.ticks == 0
+    ents = read_entities(path)
+    assert f"{body_path('link7')}/link7_visual" in ents  # the static geometry is there
+    assert body_path("link7") not in ents  # no tick, no pose
+    assert "TextDocument:text" in ents["summary"].static
+
+
+def test_missing_directory_raises_recording_error(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="cannot open the recording sink"):
+        Recorder(tmp_path / "missing" / "run.rrd", recording_id="x")
+
+
+def test_a_sink_is_required_and_flush_every_is_checked(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="needs a file path"):
+        Recorder(None, recording_id="x")
+    with pytest.raises(InvalidInputError, match="flush_every"):
+        Recorder(tmp_path / "a.rrd", recording_id="x", flush_every=0)
+
+
+def test_close_is_idempotent(tmp_path: Path) -> None:
+    path = tmp_path / "empty.rrd"
+    rec = Recorder(path, recording_id="empty")
+    rec.close()
+    rec.close()
+    assert rec.closed
+    assert RrdReader(path).recordings()[0].recording_id == "empty"
+
+
+def test_ellipsoid_rotation_is_proper() -> None:
+    reflection = np.diag([1.0, 1.0, -1.0])[None]
+    q = _rotation_quats_xyzw(reflection)
+    np.testing.assert_allclose(q, [[0.0, 0.0, 0.0, 1.0]])
+    half_turn_z = np.diag([-1.0, -1.0, 1.0])[None]
+    np.testing.assert_allclose(np.abs(_rotation_quats_xyzw(half_turn_z)), [[0, 0, 1, 0]])
+    np.testing.assert_allclose(_rotation_quats_xyzw(np.full((1, 3, 3), np.nan)), [[0, 0, 0, 1]])
