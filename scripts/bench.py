@@ -131,7 +131,7 @@ def nominal_run(record: Path | None) -> tuple[float, float, Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--trials", type=int, default=8, help="trials per sweep measurement")
+    parser.add_argument("--trials", type=int, default=16, help="trials per sweep measurement")
     parser.add_argument("--repeats", type=int, default=3, help="nominal runs per mode")
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
