@@ -313,8 +313,6 @@ class Simulation:
         kp = self.model.actuator_gainprm[act, 0]
         kv = -self.model.actuator_biasprm[act, 2]
         self._ff = kv / kp if self.config.velocity_feedforward else np.zeros(7)
-        self.gripper_ctrl_override: float | None = None
-        self.gripper_ctrl_last = 0.0
 
         horizon = task.trajectory.end_time + self.criteria.settle_time + self.criteria.failure_grace
         self.max_ticks = int(np.ceil(horizon / self.dt)) + 2
@@ -336,7 +334,6 @@ class Simulation:
         self._corners_O = signs * brick_size
         self._brick_width = 2.0 * float(brick_size[1])
         self._pad_pairs = [(pad, scene.brick_geom_id) for pad in scene.pad_geom_ids]
-        self._bad_count = self._bad_state_warnings()
         self._time_expected = float(self.data.time)
         self._eig, self._eigvec, self._eigquat = np.empty(3), np.empty(9), np.empty(4)
         self._inv_v_max = 1.0 / scene.v_max
@@ -359,12 +356,6 @@ class Simulation:
         return SE3.from_rotation_and_translation(
             SO3(np.array(self.data.xquat[b])), np.array(self.data.xpos[b])
         )
-
-    def tool_pose(self) -> SE3:
-        """Current (simulated) pose X_WG of the tool site."""
-        s = self.scene.tool_site_id
-        R = self.data.site_xmat[s].reshape(3, 3)
-        return SE3.from_rotation_and_translation(SO3.from_matrix(R), self.data.site_xpos[s].copy())
 
     def gripper_gap(self) -> float:
         """Measured finger gap [m]."""
@@ -518,9 +509,7 @@ class Simulation:
         log.condition_t[k] = c
         log.manipulability_t[k] = w
 
-        width = traj.gripper_width(t)
-        ctrl_gripper = width if self.gripper_ctrl_override is None else self.gripper_ctrl_override
-        self.gripper_ctrl_last = ctrl_gripper
+        ctrl_gripper = traj.gripper_width(t)
         d.ctrl[sc.arm_actuator_ids] = self.q_cmd + self._ff * qdot
         d.ctrl[sc.gripper_actuator_id] = ctrl_gripper
         for _ in range(self.substeps):
@@ -529,7 +518,6 @@ class Simulation:
         # that stopped advancing in time is as bad as a non-finite one.
         self._time_expected += self.substeps * self.model.opt.timestep
         if abs(d.time - self._time_expected) > 1e-6 or not math.isfinite(float(d.qacc.sum())):
-            self._bad_count = self._bad_state_warnings()
             self.fail("nan", f"simulation state became non-finite at t={t:.3f} s")
 
         # ---- store
@@ -589,14 +577,6 @@ class Simulation:
 
     def _on_mujoco_warning(self, message: str) -> None:
         self.emit("mujoco-warning", f"MuJoCo: {message}", level="warn")
-
-    def _bad_state_warnings(self) -> int:
-        w = self.data.warning
-        return int(
-            w[mujoco.mjtWarning.mjWARN_BADQPOS].number
-            + w[mujoco.mjtWarning.mjWARN_BADQVEL].number
-            + w[mujoco.mjtWarning.mjWARN_BADQACC].number
-        )
 
     def _limit_violation(self, q: np.ndarray, q_cmd: np.ndarray) -> float:
         """Largest distance [rad] of ``q`` or ``q_cmd`` past a joint limit (0 inside)."""
