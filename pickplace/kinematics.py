@@ -1,9 +1,9 @@
 """Arm-only kinematics for differential IK: tool pose and Jacobian as functions of q.
 
-The IK works on its own model, compiled from the scene with every joint but the arm's removed
-(fingers, the brick's free joint), so that ``nq = nv = 7`` and mink's tasks and limits see
-only the arm. Bodies, sites and geometry are unchanged, so the tool site's forward kinematics
-are identical to the simulation's.
+The IK works on the scene's arm-only model (:attr:`~pickplace.scene.Scene.arm_model`), in which
+every joint but the arm's is removed (fingers, the brick's free joint), so that nq = nv = 7 and
+mink's tasks and limits see only the arm. Bodies, sites and geometry are unchanged, so the tool
+site's forward kinematics are identical to the simulation's.
 """
 
 from __future__ import annotations
@@ -16,42 +16,16 @@ from mink.lie import SE3, SO3
 from pickplace.scene import Scene
 
 
-def build_arm_model(scene: Scene) -> mujoco.MjModel:
-    """Compile the scene with only the arm joints left (nq = nv = 7)."""
-    spec = mujoco.MjSpec.from_file(str(scene.path))
-    for collection in (
-        "actuators",
-        "tendons",
-        "equalities",
-        "sensors",
-        "keys",
-        "pairs",
-        "excludes",
-    ):
-        for element in list(getattr(spec, collection)):
-            spec.delete(element)
-    keep = set(scene.names.arm_joints)
-    for joint in list(spec.joints):
-        if joint.name not in keep:
-            spec.delete(joint)
-    model = spec.compile()
-    # Joint order must match the scene's arm joint order.
-    order = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(model.njnt)]
-    if tuple(order) != scene.names.arm_joints:
-        raise ValueError(f"arm joints in unexpected order {order}")
-    return model
-
-
 class ArmKinematics:
     """Tool-site forward kinematics and Jacobian of the arm.
 
     Args:
         scene: The loaded scene.
-        model: Arm-only model; built with :func:`build_arm_model` if omitted.
+        model: Arm-only model; the scene's :attr:`Scene.arm_model` if omitted.
     """
 
     def __init__(self, scene: Scene, model: mujoco.MjModel | None = None) -> None:
-        self.model = model if model is not None else build_arm_model(scene)
+        self.model = model if model is not None else scene.arm_model
         self.configuration = mink.Configuration(self.model, q=scene.q_home.copy())
         self.data = self.configuration.data
         self.tool_site = scene.names.tool_site

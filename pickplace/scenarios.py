@@ -135,8 +135,9 @@ def singular_reach_task(scene: Scene, name: str, seed: int, plan: PlanConfig | N
     and can be at most upper arm + forearm (0.42 + 0.40 m) from the shoulder (joint 2).
     """
     plan = plan or PlanConfig()
-    X_home = home_tool_pose(scene)
     kin = ArmKinematics(scene)
+    kin.update(scene.q_home)
+    X_home = kin.X_WG()
     kin.update(np.zeros(7))
     data, model = kin.data, kin.model
     p_shoulder = data.xpos[model.body("link2").id].copy()

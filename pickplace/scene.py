@@ -8,6 +8,7 @@ listing the names of that kind that do exist.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import mujoco
@@ -228,6 +229,37 @@ class Scene:
     home_key_id: int
     p_W_base: np.ndarray
     q_home: np.ndarray = field(repr=False)
+
+    @cached_property
+    def arm_model(self) -> mujoco.MjModel:
+        """The scene compiled with only the arm joints left (nq = nv = 7), for the IK.
+
+        Fingers, the brick's free joint and everything that refers to them (actuators,
+        tendons, equalities, sensors, keyframes) are removed; bodies, sites and geometry are
+        unchanged, so the tool site's forward kinematics equal the simulation's. Compiled once
+        per scene and shared (read-only) by every controller and planner.
+        """
+        spec = mujoco.MjSpec.from_file(str(self.path))
+        for collection in (
+            "actuators",
+            "tendons",
+            "equalities",
+            "sensors",
+            "keys",
+            "pairs",
+            "excludes",
+        ):
+            for element in list(getattr(spec, collection)):
+                spec.delete(element)
+        keep = set(self.names.arm_joints)
+        for joint in list(spec.joints):
+            if joint.name not in keep:
+                spec.delete(joint)
+        model = spec.compile()
+        order = tuple(names_of(model, mujoco.mjtObj.mjOBJ_JOINT))
+        if order != self.names.arm_joints:
+            raise SceneError(f"arm joints {order} are not in the order {self.names.arm_joints}")
+        return model
 
     @property
     def arm_joint_names(self) -> tuple[str, ...]:
