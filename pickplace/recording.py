@@ -176,32 +176,6 @@ def _scalar_columns(values: np.ndarray) -> list[rr.ComponentColumn]:
     return [rr.ComponentColumn(_DESCRIPTORS["Scalars:scalars"], batch, offsets=offsets)]
 
 
-def _rotation_quats_xyzw(U: np.ndarray) -> np.ndarray:
-    """Proper-rotation quaternions (T, 4) xyzw from the columns of matrices U (T, 3, 3).
-
-    A reflection (det < 0) gets its last column flipped, which leaves the ellipsoid unchanged;
-    rows that are not finite give the identity.
-    """
-    R = np.array(U, dtype=np.float64).reshape(-1, 3, 3)
-    bad = ~np.all(np.isfinite(R), axis=(1, 2))
-    R[bad] = np.eye(3)
-    flip = np.linalg.det(R) < 0.0
-    R[flip, :, 2] *= -1.0
-    d0, d1, d2 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
-    q = 0.5 * np.sqrt(
-        np.maximum(
-            0.0,
-            np.stack(
-                [1.0 + d0 - d1 - d2, 1.0 - d0 + d1 - d2, 1.0 - d0 - d1 + d2, 1.0 + d0 + d1 + d2], 1
-            ),
-        )
-    )
-    q[:, 0] = np.copysign(q[:, 0], R[:, 2, 1] - R[:, 1, 2])
-    q[:, 1] = np.copysign(q[:, 1], R[:, 0, 2] - R[:, 2, 0])
-    q[:, 2] = np.copysign(q[:, 2], R[:, 1, 0] - R[:, 0, 1])
-    return np.asarray(q / np.linalg.norm(q, axis=1, keepdims=True))
-
-
 def _vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted per-vertex normals of a triangle mesh."""
     normals = np.zeros_like(verts)
@@ -721,7 +695,7 @@ class Recorder:
             "world/tool/manipulability_ellipsoid",
             times,
             rr.Ellipsoids3D.columns(
-                half_sizes=half, centers=log.p_WG[sl], quaternions=_rotation_quats_xyzw(log.U_t[sl])
+                half_sizes=half, centers=log.p_WG[sl], quaternions=_xyzw(log.quat_t[sl])
             ),
         )
 

@@ -161,7 +161,8 @@ class TickLog:
         self.quat_WG = np.zeros((n, 4))
         self.sigma = np.zeros((n, 6))
         self.sigma_t = np.zeros((n, 3))
-        self.U_t = np.zeros((n, 3, 3))
+        self.U_t = np.zeros((n, 3, 3))  # axes of the translational velocity ellipsoid
+        self.quat_t = np.zeros((n, 4))  # the same rotation (det U_t = +1) as a wxyz quaternion
         self.condition = np.zeros(n)
         self.condition_t = np.zeros(n)
         self.manipulability = np.zeros((n, 4))
@@ -335,7 +336,7 @@ class Simulation:
         self._brick_width = 2.0 * float(brick_size[1])
         self._pad_pairs = [(pad, scene.brick_geom_id) for pad in scene.pad_geom_ids]
         self._time_expected = float(self.data.time)
-        self._eig, self._eigvec, self._eigquat = np.empty(3), np.empty(9), np.empty(4)
+        self._eig, self._eigvec = np.empty(3), np.empty(9)
         self._inv_v_max = 1.0 / scene.v_max
         self._finger_adr = (int(scene.finger_qpos_adr[0]), int(scene.finger_qpos_adr[1]))
         times = {kf.name: kf.t for kf in task.trajectory.keyframes}
@@ -497,7 +498,7 @@ class Simulation:
         # Translational ellipsoid: eigen-decomposition of J_v J_vᵀ = U Σ² Uᵀ. mju_eig3 returns
         # eigenvalues in decreasing order and U as a proper rotation (columns = axes).
         Jv = J[:3]
-        mujoco.mju_eig3(self._eig, self._eigvec, self._eigquat, (Jv @ Jv.T).ravel())
+        mujoco.mju_eig3(self._eig, self._eigvec, log.quat_t[k], (Jv @ Jv.T).ravel())
         sigma_t = np.sqrt(np.maximum(self._eig, 0.0))
         log.sigma[k] = sigma
         log.sigma_t[k] = sigma_t

@@ -95,3 +95,24 @@ def test_holding_torques_equal_mujocos_generalized_force_of_the_weight(scene) ->
         mujoco.mj_jacSite(model, data, jacp, jacr, scene.tool_site_id)
         J = np.vstack([jacp, jacr])[:, scene.arm_dof_adr]
         np.testing.assert_allclose(holding_torques(J, mass), -qfrc[scene.arm_dof_adr], atol=1e-10)
+
+
+def test_logged_ellipsoid_axes_diagonalise_the_translational_velocity_ellipsoid() -> None:
+    """Per tick the loop stores U_t (columns = axes) and its quaternion: one proper rotation
+    with J_v J_vᵀ = U_t diag(σ_t²) U_tᵀ."""
+    from pickplace.runner import RunRequest, prepare
+
+    _, _, sim = prepare(RunRequest())
+    for k in range(300):
+        sim._tick(k, k * sim.dt)
+        sim.ticks += 1
+    log, kin = sim.log, sim.controller.kinematics
+    for k in range(0, 300, 37):
+        U = log.U_t[k]
+        R = np.empty(9)
+        mujoco.mju_quat2Mat(R, log.quat_t[k])
+        np.testing.assert_allclose(R.reshape(3, 3), U, atol=1e-9)
+        assert np.linalg.det(U) == pytest.approx(1.0, abs=1e-9)
+        kin.update(log.q_cmd[k - 1] if k else sim.scene.q_home)
+        Jv = kin.J_WG()[:3]
+        np.testing.assert_allclose(U @ np.diag(log.sigma_t[k] ** 2) @ U.T, Jv @ Jv.T, atol=1e-9)

@@ -15,7 +15,7 @@ from rerun.chunk import RrdReader
 
 from pickplace.controllers import make_controller
 from pickplace.errors import InvalidInputError, RecordingError
-from pickplace.recording import Recorder, _rotation_quats_xyzw
+from pickplace.recording import Recorder
 from pickplace.scenarios import get_scenario
 from pickplace.scene import Scene, load_scene
 from pickplace.sim import RunResult, Simulation
@@ -334,12 +334,3 @@ def test_close_is_idempotent(tmp_path: Path) -> None:
     rec.close()
     assert rec.closed
     assert RrdReader(path).recordings()[0].recording_id == "empty"
-
-
-def test_ellipsoid_rotation_is_proper() -> None:
-    reflection = np.diag([1.0, 1.0, -1.0])[None]
-    q = _rotation_quats_xyzw(reflection)
-    np.testing.assert_allclose(q, [[0.0, 0.0, 0.0, 1.0]])
-    half_turn_z = np.diag([-1.0, -1.0, 1.0])[None]
-    np.testing.assert_allclose(np.abs(_rotation_quats_xyzw(half_turn_z)), [[0, 0, 1, 0]])
-    np.testing.assert_allclose(_rotation_quats_xyzw(np.full((1, 3, 3), np.nan)), [[0, 0, 0, 1]])
