@@ -18,8 +18,9 @@ and returns the joint velocities q̇ [rad/s] that realise it, with a status:
 from __future__ import annotations
 
 import enum
+import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -30,7 +31,7 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace.errors import ControllerError, UnknownNameError, require_positive
-from pickplace.kinematics import ArmKinematics, pose_error_W
+from pickplace.kinematics import ArmKinematics, pose_error_W_floats
 from pickplace.scene import Scene
 
 
@@ -47,6 +48,7 @@ IK_STATUSES: tuple[str, ...] = tuple(s.value for s in IKStatus)
 
 # A commanded twist smaller than this is "at rest": no stuck/limited verdict is drawn from it.
 _REST_TWIST = 1e-4
+_REST_TWIST_SQ = _REST_TWIST**2
 # Fraction of the commanded twist below which the tool counts as stuck (Drake's DiffIK: 0.01).
 _STUCK_FRACTION = 0.01
 
@@ -68,9 +70,10 @@ class ResolvedRateGains:
         require_positive("orientation gain", self.orientation)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class IKResult:
-    """One IK tick.
+    """One IK tick. Every array is new per tick (``error``, ``V_cmd`` and ``x_WG`` are disjoint
+    views of one new array), so callers may keep them.
 
     Attributes:
         qdot: Joint velocities [rad/s].
@@ -78,6 +81,8 @@ class IKResult:
         V_cmd: Commanded tool spatial velocity [v; ω] in world [m/s, rad/s].
         error: Pose error [position; rotation vector] in world [m, rad].
         J_WG: Tool Jacobian (6, 7) at the tick's q.
+        x_WG: Tool pose at the tick's q (the commanded tool frame) as mink's wxyz_xyz vector
+            [qw, qx, qy, qz, x, y, z] ([-], [m]).
     """
 
     qdot: np.ndarray
@@ -85,6 +90,7 @@ class IKResult:
     V_cmd: np.ndarray
     error: np.ndarray
     J_WG: np.ndarray
+    x_WG: np.ndarray
 
 
 class DiffIKController(ABC):
@@ -111,7 +117,9 @@ class DiffIKController(ABC):
         self.gains = gains or ResolvedRateGains()
         self.kinematics = kinematics or ArmKinematics(scene)
         self.v_max = scene.v_max.copy()
-        self._K = np.repeat([self.gains.position, self.gains.orientation], 3)
+        self._K = np.repeat([self.gains.position, self.gains.orientation], 3)  # diag of K
+        self._k_p = float(self.gains.position)
+        self._k_R = float(self.gains.orientation)
 
     def command(
         self, q: np.ndarray, X_WG_target: SE3 | np.ndarray, V_WG_ff: np.ndarray
@@ -122,26 +130,59 @@ class DiffIKController(ABC):
             q: Current (commanded) joint positions [rad].
             X_WG_target: Desired tool pose now, as an SE3 or its wxyz_xyz vector.
             V_WG_ff: Desired tool spatial velocity [v; ω] in world [m/s, rad/s].
+
+        Returns:
+            The tick's joint velocities, status, commanded twist, pose error, tool Jacobian
+            and tool pose at ``q``, all in new arrays.
         """
-        x_target = X_WG_target.wxyz_xyz if isinstance(X_WG_target, SE3) else X_WG_target
+        # (isinstance against ndarray: SE3 derives from an ABC, whose isinstance is slow.)
+        x_target = X_WG_target if isinstance(X_WG_target, np.ndarray) else X_WG_target.wxyz_xyz
         kin = self.kinematics
         kin.update(q)
-        x_WG = kin.wxyz_xyz()
+        x_WG_floats = kin.wxyz_xyz_list()
         J = kin.J_WG()
-        error = pose_error_W(x_WG, x_target)
-        V_cmd = V_WG_ff + self._K * error
-        qdot, status = self._solve(q, x_WG, J, V_cmd)
-        if status is IKStatus.OK and float(V_cmd @ V_cmd) > _REST_TWIST**2:
-            achieved = float(V_cmd @ (J @ qdot)) / float(V_cmd @ V_cmd)
-            if achieved < _STUCK_FRACTION:
-                status = IKStatus.STUCK
-        return IKResult(qdot=qdot, status=status, V_cmd=V_cmd, error=error, J_WG=J)
+        # Pose error and commanded twist in plain float math (six-element NumPy operations
+        # cost more in call overhead than in arithmetic).
+        e = pose_error_W_floats(x_WG_floats, x_target.tolist())
+        v_x, v_y, v_z, w_x, w_y, w_z = V_WG_ff.tolist()
+        k_p, k_R = self._k_p, self._k_R
+        v_x += k_p * e[0]
+        v_y += k_p * e[1]
+        v_z += k_p * e[2]
+        w_x += k_R * e[3]
+        w_y += k_R * e[4]
+        w_z += k_R * e[5]
+        V_cmd_floats = (v_x, v_y, v_z, w_x, w_y, w_z)
+        # One new array holds error, V_cmd and x_WG (three disjoint views): one allocation.
+        arrays = np.array((*e, *V_cmd_floats, *x_WG_floats))
+        error, V_cmd, x_WG = arrays[:6], arrays[6:12], arrays[12:]
+        qdot, status = self._solve(q, J, V_cmd, x_WG_floats, V_cmd_floats)
+        if status is IKStatus.OK:
+            V_sq = v_x * v_x + v_y * v_y + v_z * v_z + w_x * w_x + w_y * w_y + w_z * w_z
+            if V_sq > _REST_TWIST_SQ:
+                achieved = float(V_cmd.dot(J.dot(qdot))) / V_sq
+                if achieved < _STUCK_FRACTION:
+                    status = IKStatus.STUCK
+        return IKResult(qdot=qdot, status=status, V_cmd=V_cmd, error=error, J_WG=J, x_WG=x_WG)
 
     @abstractmethod
     def _solve(
-        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
+        self,
+        q: np.ndarray,
+        J: np.ndarray,
+        V_cmd: np.ndarray,
+        x_WG: Sequence[float],
+        V_cmd_floats: Sequence[float],
     ) -> tuple[np.ndarray, IKStatus]:
-        """Return joint velocities [rad/s] realising ``V_cmd`` and a status."""
+        """Joint velocities [rad/s] realising ``V_cmd`` and a status.
+
+        Args:
+            q: Joint positions [rad], loaded into :attr:`kinematics`.
+            J: Tool Jacobian (6, 7) at q.
+            V_cmd: Commanded tool spatial velocity [v; ω] in world [m/s, rad/s].
+            x_WG: Tool pose at q as floats [qw, qx, qy, qz, x, y, z] ([-], [m]).
+            V_cmd_floats: ``V_cmd`` as floats.
+        """
 
 
 class PinvController(DiffIKController):
@@ -159,11 +200,18 @@ class PinvController(DiffIKController):
         self.cutoff = require_positive("pinv cutoff", cutoff)
 
     def _solve(
-        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
+        self,
+        q: np.ndarray,
+        J: np.ndarray,
+        V_cmd: np.ndarray,
+        x_WG: Sequence[float],
+        V_cmd_floats: Sequence[float],
     ) -> tuple[np.ndarray, IKStatus]:
         U, s, Vt = np.linalg.svd(J, full_matrices=False)
-        s_inv = np.where(s > self.cutoff, 1.0 / np.where(s > 0.0, s, 1.0), 0.0)
-        return Vt.T @ (s_inv * (U.T @ V_cmd)), IKStatus.OK
+        cutoff = self.cutoff  # > 0, so σ > cutoff also guards the division
+        s_inv = np.array([1.0 / sigma if sigma > cutoff else 0.0 for sigma in s.tolist()])
+        s_inv *= V_cmd.dot(U)  # Σ⁺ Uᵀ V
+        return s_inv.dot(Vt), IKStatus.OK  # V Σ⁺ Uᵀ V_cmd
 
 
 class DLSController(DiffIKController):
@@ -178,13 +226,19 @@ class DLSController(DiffIKController):
     def __init__(self, scene: Scene, dt: float, damping: float = 0.05, **kwargs: object) -> None:
         super().__init__(scene, dt, **kwargs)  # type: ignore[arg-type]
         self.damping = require_positive("dls damping", damping)
+        self._damping_sq_I = self.damping**2 * np.eye(6)
 
     def _solve(
-        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
+        self,
+        q: np.ndarray,
+        J: np.ndarray,
+        V_cmd: np.ndarray,
+        x_WG: Sequence[float],
+        V_cmd_floats: Sequence[float],
     ) -> tuple[np.ndarray, IKStatus]:
-        JJt = J @ J.T
-        JJt.flat[:: JJt.shape[0] + 1] += self.damping**2
-        return J.T @ np.linalg.solve(JJt, V_cmd), IKStatus.OK
+        JJt = J.dot(J.T)
+        JJt += self._damping_sq_I
+        return np.linalg.solve(JJt, V_cmd).dot(J), IKStatus.OK  # Jᵀ (J Jᵀ + λ² I)⁻¹ V
 
 
 @dataclass(frozen=True)
@@ -219,10 +273,15 @@ class QPController(DiffIKController):
 
     Two backends give the same answer (tested to 1e-8):
 
-    - ``"fast"`` (default): the tasks' residuals come from mink every tick, but the constant
-      parts (posture weight, limit structure) are built once, the joint-position and
-      joint-speed limits are merged into simple bounds, and daqp is called directly.
+    - ``"fast"`` (default): the frame task's error and Jacobian come from mink every tick and
+      are weighted with the task's cost and gain; the posture task's are read from the task
+      (on hinge/slide-only models its error is simply q − q_target, otherwise mink computes
+      it); the joint-position and joint-speed limits are merged into simple bounds; the QP
+      is assembled in preallocated buffers and daqp is called directly.
     - ``"mink"``: ``mink.solve_ik(..., solver="daqp")`` on the same tasks and limits.
+
+    The frame task's target is an SE3 owned by the controller and rewritten in place every
+    tick (see :meth:`set_frame_target`).
 
     Args:
         weights: Task costs and limit settings.
@@ -264,71 +323,234 @@ class QPController(DiffIKController):
             model, dict(zip(scene.names.arm_joints, self.v_max.tolist(), strict=True))
         )
         self.limits: list[mink.Limit] = [self.configuration_limit, self.velocity_limit]
-        # Constant parts of the fast QP.
+        # The frame task's target: one SE3 whose parameter vector is rewritten every tick.
+        self._X_WG_next = SE3(wxyz_xyz=np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+        self._x_WG_next = self._X_WG_next.wxyz_xyz
+        self.frame_task.transform_target_to_world = self._X_WG_next
+        # With hinge and slide joints only, q ⊖ q_target is q − q_target (nq = nv) and the
+        # posture Jacobian is the identity: no per-tick call into mink for the posture task.
+        joint_types = np.asarray(model.jnt_type)
+        self._posture_is_difference = bool(
+            model.nq == model.nv
+            and np.all(
+                (joint_types == mujoco.mjtJoint.mjJNT_HINGE)
+                | (joint_types == mujoco.mjtJoint.mjJNT_SLIDE)
+            )
+        )
+        # Buffers of the fast QP, and the parts of it that only change with the tasks' costs
+        # and gains (refreshed by _refresh_task_weights whenever those change).
         nv = model.nv
+        self._H = np.zeros((nv, nv))
+        self._H_diag = self._H.reshape(-1)[:: nv + 1]  # a view of H's diagonal
+        self._c = np.zeros(nv)
         self._A_empty = np.zeros((0, nv))
-        self._dq_max = self.v_max * self.dt
-        self._q_lo = self.configuration_limit.lower.copy()
-        self._q_hi = self.configuration_limit.upper.copy()
-        self._H_const = np.eye(nv) * (w.posture_cost**2 + w.damping)
-        self._unit_quat = np.array([1.0, 0.0, 0.0, 0.0])
-        self._last_bounds = self.bounds(scene.q_home)
+        self._sense = np.zeros(nv, dtype=np.int32)
+        self._task_weights_key: tuple[object, ...] = ()
+        self._frame_unit_cost = True
+        self._frame_cost_col = np.ones((self.frame_task.k, 1))
+        self._frame_gain_cost = np.ones(self.frame_task.k)
+        self._frame_unit_gain_cost = True
+        self._posture_gain_cost = np.zeros(nv)
+        self._posture_gain_cost_sq = np.zeros(nv)
+        self._H_diag_const = np.zeros(nv)
+        # Simple bounds on Δq (see bounds).
+        self._limit_gain = float(w.limit_gain)
+        self._q_max = self.configuration_limit.upper.tolist()
+        self._q_min = self.configuration_limit.lower.tolist()
+        self._dq_max = (self.v_max * self.dt).tolist()
+        self._lower = np.empty(nv)
+        self._upper = np.empty(nv)
+        self._bound_floats: tuple[list[float], list[float]] = ([], [])
+        self._bounds_into(scene.q_home)
         self._solve_qp: Callable[[np.ndarray], np.ndarray | None] = (
             self._solve_fast if backend == "fast" else self._solve_mink
         )
 
-    def set_frame_target(self, x_WG: np.ndarray, V_cmd: np.ndarray) -> None:
+    def set_frame_target(
+        self, x_WG: np.ndarray | Sequence[float], V_cmd: np.ndarray | Sequence[float]
+    ) -> None:
         """Aim the frame task one tick ahead of ``x_WG`` (wxyz_xyz) along ``V_cmd``.
 
-        Target: position p + v·dt, orientation exp(ω·dt)·R (ω in world).
+        Target: position p + v·dt [m], orientation exp(ω·dt)·R (ω in world [rad/s]). Plain
+        float math, written into the controller's target SE3, which the frame task then
+        holds (a caller that keeps ``frame_task.transform_target_to_world`` sees it change
+        on the next tick).
+
+        Args:
+            x_WG: Tool pose [qw, qx, qy, qz, x, y, z] ([-], [m]).
+            V_cmd: Commanded tool spatial velocity [v; ω] in world [m/s, rad/s].
         """
-        step = self._unit_quat.copy()
-        mujoco.mju_quatIntegrate(step, V_cmd[3:], self.dt)  # exp(ω dt)
-        target = np.empty(7)
-        mujoco.mju_mulQuat(target[:4], step, x_WG[:4])
-        target[4:] = x_WG[4:] + V_cmd[:3] * self.dt
-        self.frame_task.set_target(SE3(wxyz_xyz=target))
+        if isinstance(x_WG, np.ndarray):
+            x_WG = x_WG.tolist()
+        if isinstance(V_cmd, np.ndarray):
+            V_cmd = V_cmd.tolist()
+        qw, qx, qy, qz, px, py, pz = x_WG
+        vx, vy, vz, wx, wy, wz = V_cmd
+        dt = self.dt
+        speed = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if speed > 0.0:
+            # exp(ω dt) = (cos(|ω| dt / 2), sin(|ω| dt / 2) ω/|ω|), applied on the left.
+            half_angle = 0.5 * dt * speed
+            sw = math.cos(half_angle)
+            k = math.sin(half_angle) / speed
+            sx, sy, sz = k * wx, k * wy, k * wz
+            qw, qx, qy, qz = (
+                sw * qw - sx * qx - sy * qy - sz * qz,
+                sw * qx + sx * qw + sy * qz - sz * qy,
+                sw * qy + sy * qw + sz * qx - sx * qz,
+                sw * qz + sz * qw + sx * qy - sy * qx,
+            )
+        self._x_WG_next[:] = (qw, qx, qy, qz, px + vx * dt, py + vy * dt, pz + vz * dt)
+        self.frame_task.transform_target_to_world = self._X_WG_next
 
     def _solve_mink(self, q: np.ndarray) -> np.ndarray | None:
-        self._last_bounds = self.bounds(q)
+        self._bounds_into(q)
         try:
             return mink.solve_ik(
-                self.configuration, self.tasks, self.dt, solver="daqp", limits=self.limits
+                self.configuration,
+                self.tasks,
+                self.dt,
+                solver="daqp",
+                damping=self.weights.damping,
+                limits=self.limits,
             )
         except mink.NoSolutionFound:
             return None
 
     def bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per-joint bounds on Δq [rad]: the tighter of speed limit and distance to limit."""
-        g = self.weights.limit_gain
-        upper = np.minimum(self._dq_max, g * (self._q_hi - q))
-        lower = np.maximum(-self._dq_max, -g * (q - self._q_lo))
+        """Per-joint bounds on Δq [rad]: the tighter of speed limit and distance to limit,
+        upper = min(v_max dt, g (q_max − q)) and lower = max(−v_max dt, −g (q − q_min)), with
+        q_max, q_min the joint limits less the margin and g the limit gain.
+
+        Args:
+            q: Joint positions [rad].
+
+        Returns:
+            New arrays (lower, upper) [rad].
+        """
+        lower, upper = self._bounds_floats(q)
+        return np.array(lower), np.array(upper)
+
+    def _bounds_floats(self, q: np.ndarray) -> tuple[list[float], list[float]]:
+        """:meth:`bounds` as lists of floats (lower, upper) [rad] (plain float math)."""
+        g = self._limit_gain
+        lower: list[float] = []
+        upper: list[float] = []
+        for q_j, q_max, q_min, dq_max in zip(
+            q.tolist(), self._q_max, self._q_min, self._dq_max, strict=True
+        ):
+            hi = g * (q_max - q_j)
+            upper.append(dq_max if dq_max < hi else hi)  # NaN-propagating min
+            lo = g * (q_min - q_j)  # = −g (q − q_min)
+            lower.append(-dq_max if lo < -dq_max else lo)  # NaN-propagating max
         return lower, upper
 
+    def _bounds_into(self, q: np.ndarray) -> None:
+        """Write :meth:`bounds` at ``q`` into the QP's bound vectors (and keep the floats)."""
+        self._bound_floats = lower, upper = self._bounds_floats(q)
+        self._lower[:] = lower
+        self._upper[:] = upper
+
+    def _refresh_task_weights(self) -> None:
+        """Recompute the QP parts that depend only on the tasks' costs and gains, if those
+        changed since the last tick (a cheap check: two byte strings and four floats)."""
+        frame, posture = self.frame_task, self.posture_task
+        key = (
+            frame.cost.tobytes(),
+            frame.gain,
+            frame.lm_damping,
+            posture.cost.tobytes(),
+            posture.gain,
+            posture.lm_damping,
+        )
+        if key == self._task_weights_key:
+            return
+        self._task_weights_key = key
+        self._frame_unit_cost = bool(np.all(frame.cost == 1.0))
+        self._frame_cost_col = frame.cost[:, None].copy()
+        self._frame_gain_cost = frame.gain * frame.cost
+        self._frame_unit_gain_cost = bool(np.all(self._frame_gain_cost == 1.0))
+        self._posture_gain_cost = posture.gain * posture.cost
+        self._posture_gain_cost_sq = self._posture_gain_cost * posture.cost
+        # H's constant diagonal: the damping, plus the posture task's WᵀW = diag(cost²) when
+        # its Jacobian is the identity.
+        self._H_diag_const = np.full(len(posture.cost), self.weights.damping)
+        if self._posture_is_difference:
+            self._H_diag_const += posture.cost**2
+
     def _solve_fast(self, q: np.ndarray) -> np.ndarray | None:
-        W, e, mu = self.frame_task.compute_qp_residual(self.configuration)
-        e_posture = -self.weights.posture_gain * self.posture_task.compute_error(self.configuration)
-        H = W.T @ W + self._H_const
-        H.flat[:: H.shape[0] + 1] += mu
-        c = -(e @ W) - self.weights.posture_cost**2 * e_posture
-        lower, upper = self._last_bounds = self.bounds(q)
-        x, _, exitflag, _ = daqp.solve(H, c, self._A_empty, upper, lower)
+        """The QP of :func:`mink.solve_ik` assembled and solved directly.
+
+        Minimise ½ Δqᵀ H Δq + cᵀ Δq subject to the bounds on Δq, where, as mink builds them
+        from each task's cost-weighted Jacobian W, error e, gain α and Levenberg-Marquardt
+        term μ: H = Σ WᵀW + (damping + Σ μ) I and c = Σ Wᵀ(α cost ⊙ e). The frame task's e
+        and Jacobian come from mink every tick; the posture task's target is read from the
+        task every tick and, on hinge/slide-only models, its e is q − q_target and its
+        Jacobian the identity.
+
+        Args:
+            q: Joint positions [rad]; forward kinematics must already be loaded at q.
+
+        Returns:
+            Joint velocities [rad/s] (a new array), or None if daqp found no solution.
+        """
+        self._refresh_task_weights()
+        frame, posture = self.frame_task, self.posture_task
+        e, W = frame._error_and_jacobian(self.configuration)  # both new arrays
+        if not self._frame_unit_cost:
+            W *= self._frame_cost_col
+        if not self._frame_unit_gain_cost:
+            e *= self._frame_gain_cost  # −(weighted error), in the units of W's rows
+        H, c = self._H, self._c
+        np.dot(W.T, W, out=H)
+        np.dot(e, W, out=c)
+        mu = frame.lm_damping * float(e.dot(e)) if frame.lm_damping else 0.0
+        if self._posture_is_difference:
+            target = posture.target_q
+            if target is None:
+                raise mink.TargetNotSet(type(posture).__name__)
+            r = q - target  # the posture error q ⊖ q_target
+            if posture.lm_damping:
+                r_weighted = r * self._posture_gain_cost  # −(weighted error)
+                mu += posture.lm_damping * float(r_weighted.dot(r_weighted))
+            r *= self._posture_gain_cost_sq  # Wᵀ(−weighted error), W = diag(cost)
+            c += r
+        else:
+            W_posture, e_posture, mu_posture = posture.compute_qp_residual(self.configuration)
+            H += W_posture.T @ W_posture
+            c -= e_posture @ W_posture
+            mu += mu_posture
+        self._H_diag += self._H_diag_const
+        if mu:
+            self._H_diag += mu
+        self._bounds_into(q)
+        x, _, exitflag, _ = daqp.solve(H, c, self._A_empty, self._upper, self._lower, self._sense)
         if exitflag < 1:
             return None
-        return np.asarray(x) / self.dt
+        qdot: np.ndarray = x
+        qdot /= self.dt  # x is a new array
+        return qdot
 
     def _solve(
-        self, q: np.ndarray, x_WG: np.ndarray, J: np.ndarray, V_cmd: np.ndarray
+        self,
+        q: np.ndarray,
+        J: np.ndarray,
+        V_cmd: np.ndarray,
+        x_WG: Sequence[float],
+        V_cmd_floats: Sequence[float],
     ) -> tuple[np.ndarray, IKStatus]:
-        self.set_frame_target(x_WG, V_cmd)
+        self.set_frame_target(x_WG, V_cmd_floats)
         qdot = self._solve_qp(q)
         if qdot is None:
             return np.zeros_like(q), IKStatus.NO_SOLUTION
-        lower, upper = self._last_bounds
-        dq = qdot * self.dt
+        dt = self.dt
+        lower, upper = self._bound_floats
         # A joint whose step sits on its bound (within 1e-9 rad) was limited.
-        slack = min(float((upper - dq).min()), float((dq - lower).min()))
-        return qdot, IKStatus.LIMITED if slack <= 1e-9 else IKStatus.OK
+        for v, lo, hi in zip(qdot.tolist(), lower, upper, strict=True):
+            dq = v * dt
+            if hi - dq <= 1e-9 or dq - lo <= 1e-9:
+                return qdot, IKStatus.LIMITED
+        return qdot, IKStatus.OK
 
 
 CONTROLLERS: dict[str, type[DiffIKController]] = {

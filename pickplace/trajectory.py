@@ -235,6 +235,12 @@ def validate_keyframes(keyframes: Sequence[Keyframe]) -> None:
 # ------------------------------------------------------------------------- trajectory
 
 
+def _xyz(v: FloatArray) -> tuple[float, float, float]:
+    """A 3-vector as a tuple of Python floats."""
+    x, y, z = v.tolist()
+    return x, y, z
+
+
 @dataclass(frozen=True)
 class _Segment:
     """Precomputed data of one segment (world-frame quantities)."""
@@ -249,6 +255,9 @@ class _Segment:
     omega_dir_W: FloatArray
     width0: float
     dwidth: float
+    p0_xyz: tuple[float, float, float]
+    dp_xyz: tuple[float, float, float]
+    omega_dir_W_xyz: tuple[float, float, float]
 
 
 class PoseTrajectory:
@@ -279,18 +288,23 @@ class PoseTrajectory:
             R0 = a.X_WG.rotation()
             phi = rotation_log(R0.inverse() @ b.X_WG.rotation())
             p0 = np.array(a.X_WG.translation(), dtype=np.float64)
+            dp = np.asarray(b.X_WG.translation(), dtype=np.float64) - p0
+            omega_dir_W = np.asarray(R0.apply(phi), dtype=np.float64)
             self._segments.append(
                 _Segment(
                     t0=float(a.t),
                     inv_duration=1.0 / (float(b.t) - float(a.t)),
                     p0=p0,
-                    dp=np.asarray(b.X_WG.translation(), dtype=np.float64) - p0,
+                    dp=dp,
                     R0=R0,
                     q0=np.array(R0.wxyz, dtype=np.float64),
                     phi=phi,
-                    omega_dir_W=np.asarray(R0.apply(phi), dtype=np.float64),
+                    omega_dir_W=omega_dir_W,
                     width0=float(a.gripper_width),
                     dwidth=float(b.gripper_width) - float(a.gripper_width),
+                    p0_xyz=_xyz(p0),
+                    dp_xyz=_xyz(dp),
+                    omega_dir_W_xyz=_xyz(omega_dir_W),
                 )
             )
 
@@ -382,6 +396,41 @@ class PoseTrajectory:
         seg, tau = self._locate(t)
         return seg.width0 + tau * seg.dwidth
 
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray, float]:
+        """Everything the control loop needs at time ``t`` [s], with one segment lookup.
+
+        Args:
+            t: Time [s]; clamped to the trajectory like the three calls it replaces.
+
+        Returns:
+            ``(pose_wxyz_xyz(t), spatial_velocity(t), gripper_width(t))``, equal to the three
+            calls: tool pose [qw, qx, qy, qz, x, y, z] ([-], [m]), spatial velocity
+            [v; ω] in world [m/s, rad/s] and finger gap [m]. The arrays are new.
+        """
+        times = self._times
+        segments = self._segments
+        i = bisect.bisect_right(times, t) - 1
+        seg = segments[min(max(i, 0), len(segments) - 1)]
+        tau = min(max((t - seg.t0) * seg.inv_duration, 0.0), 1.0)
+        width = seg.width0 + tau * seg.dwidth
+        if t >= times[-1]:
+            x_WG = np.array(self._keyframes[-1].X_WG.wxyz_xyz, dtype=np.float64)
+            return x_WG, np.zeros(6, dtype=np.float64), width
+        profile = self._profile
+        s = profile.s(tau)
+        quat = seg.q0.copy()
+        mujoco.mju_quatIntegrate(quat, seg.phi, s)  # R0 · exp(s φ), φ in R0's frame
+        # Plain float math for the 3-vectors (as exact as NumPy's, elementwise).
+        p0x, p0y, p0z = seg.p0_xyz
+        dpx, dpy, dpz = seg.dp_xyz
+        x_WG = np.array((*quat.tolist(), p0x + s * dpx, p0y + s * dpy, p0z + s * dpz))
+        if t <= times[0]:
+            return x_WG, np.zeros(6, dtype=np.float64), width
+        s_dot = profile.ds(tau) * seg.inv_duration
+        wx, wy, wz = seg.omega_dir_W_xyz
+        V_WG = np.array((s_dot * dpx, s_dot * dpy, s_dot * dpz, s_dot * wx, s_dot * wy, s_dot * wz))
+        return x_WG, V_WG, width
+
     def sample_path(self, n: int) -> FloatArray:
         """Positions ``p_WG`` at ``n`` equally spaced times over the trajectory, shape (n, 3) [m].
 
@@ -391,4 +440,4 @@ class PoseTrajectory:
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 2:
             raise PlanError(f"n must be an integer >= 2, got {n!r}")
         times = np.linspace(self._times[0], self._times[-1], int(n))
-        return np.array([self.pose(float(t)).translation() for t in times], dtype=np.float64)
+        return np.array([self.sample(t)[0][4:] for t in times.tolist()], dtype=np.float64)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import mink
+import mujoco
 import numpy as np
 import pytest
 from mink.lie import SE3, SO3
@@ -15,6 +16,7 @@ from pickplace.controllers import (
     make_controller,
 )
 from pickplace.errors import UnknownNameError
+from pickplace.kinematics import ArmKinematics
 
 DT = 0.01
 
@@ -101,3 +103,119 @@ def test_unknown_controller_and_backend_list_the_valid_ones(scene) -> None:
         make_controller("newton", scene, DT)
     with pytest.raises(UnknownNameError, match="valid: fast, mink"):
         QPController(scene, DT, backend="osqp")
+
+
+@pytest.mark.parametrize("name", ["qp", "pinv", "dls"])
+def test_result_x_WG_is_the_forward_kinematics_of_q(scene, name: str) -> None:
+    ctrl = make_controller(name, scene, DT)
+    kin = ArmKinematics(scene)
+    rng = np.random.default_rng(4)
+    q = scene.q_home.copy()
+    for X, V in _targets(scene, rng, 20):
+        res = ctrl.command(q, X, V)
+        kin.update(q)
+        np.testing.assert_array_equal(res.x_WG, kin.wxyz_xyz())
+        np.testing.assert_array_equal(res.J_WG, kin.J_WG())
+        X_WG = SE3(wxyz_xyz=res.x_WG)
+        np.testing.assert_allclose(X_WG.translation(), kin.p_WG(), atol=1e-15)
+        np.testing.assert_allclose(X_WG.rotation().as_matrix(), kin.R_WG(), atol=1e-12)
+        # The error is the target pose minus this one.
+        np.testing.assert_allclose(res.error[:3], X.translation() - kin.p_WG(), atol=1e-15)
+        R_err = X.rotation() @ X_WG.rotation().inverse()
+        np.testing.assert_allclose(res.error[3:], R_err.log(), atol=1e-12)
+        q = q + res.qdot * DT
+
+
+@pytest.mark.parametrize("name", ["qp", "pinv", "dls"])
+def test_successive_results_do_not_alias(scene, name: str) -> None:
+    ctrl = make_controller(name, scene, DT)
+    rng = np.random.default_rng(5)
+    (X1, V1), (X2, V2) = list(_targets(scene, rng, 2))
+    q1 = scene.q_home.copy()
+    q2 = q1 + 0.05
+    first = ctrl.command(q1, X1, V1)
+    fields = ("qdot", "V_cmd", "error", "J_WG", "x_WG")
+    kept = {f: getattr(first, f).copy() for f in fields}
+    second = ctrl.command(q2, X2, V2)
+    for f in fields:
+        np.testing.assert_array_equal(getattr(first, f), kept[f], err_msg=f)
+        for g in fields:
+            assert not np.shares_memory(getattr(first, f), getattr(second, g)), (f, g)
+    assert not np.array_equal(first.x_WG, second.x_WG)
+
+
+def test_fast_qp_follows_task_costs_gains_and_targets_changed_on_the_tasks(scene) -> None:
+    """The fast backend reads the tasks: changing them after construction is seen."""
+    fast = QPController(scene, DT, backend="fast")
+    ref = QPController(scene, DT, backend="mink")
+    rng = np.random.default_rng(6)
+    q = scene.q_home.copy()
+    changes = [
+        lambda c: c.frame_task.set_position_cost(2.0),
+        lambda c: c.frame_task.set_orientation_cost(np.array([0.5, 1.0, 3.0])),
+        lambda c: setattr(c.frame_task, "gain", 0.7),
+        lambda c: setattr(c.frame_task, "lm_damping", 0.5),
+        lambda c: c.posture_task.set_cost(np.linspace(1e-3, 1e-1, 7)),
+        lambda c: setattr(c.posture_task, "gain", 0.5),
+        lambda c: setattr(c.posture_task, "lm_damping", 2.0),
+        lambda c: c.posture_task.set_target(scene.q_home + 0.2),
+    ]
+    targets = list(_targets(scene, rng, 5 * (len(changes) + 1)))
+    for k, (X, V) in enumerate(targets):
+        if k % 5 == 0 and k // 5 >= 1:
+            for ctrl in (fast, ref):
+                changes[k // 5 - 1](ctrl)
+        a, b = fast.command(q, X, V), ref.command(q, X, V)
+        np.testing.assert_allclose(a.qdot, b.qdot, atol=1e-8)
+        assert a.status is b.status
+        q = q + a.qdot * DT
+
+
+def test_fast_qp_posture_through_mink_equals_the_hinge_shortcut(scene) -> None:
+    """The general posture path (mink's residual, used unless all joints are hinge/slide)."""
+    shortcut = QPController(scene, DT)
+    general = QPController(scene, DT)
+    assert shortcut._posture_is_difference
+    general._posture_is_difference = False
+    general._task_weights_key = ()  # recompute the constant parts for the general path
+    rng = np.random.default_rng(7)
+    q = scene.q_home.copy()
+    for X, V in _targets(scene, rng, 50):
+        a, b = shortcut.command(q, X, V), general.command(q, X, V)
+        np.testing.assert_allclose(a.qdot, b.qdot, atol=1e-10)
+        q = q + a.qdot * DT
+
+
+def test_frame_target_is_one_tick_ahead_along_the_commanded_twist(scene) -> None:
+    ctrl = QPController(scene, DT)
+    rng = np.random.default_rng(8)
+    for X, V in _targets(scene, rng, 20):
+        x = X.wxyz_xyz
+        ctrl.set_frame_target(x, V)
+        step = np.array([1.0, 0.0, 0.0, 0.0])
+        mujoco.mju_quatIntegrate(step, V[3:], DT)
+        expected = np.empty(7)
+        mujoco.mju_mulQuat(expected[:4], step, x[:4])
+        expected[4:] = x[4:] + V[:3] * DT
+        target = ctrl.frame_task.transform_target_to_world
+        assert target is not None
+        np.testing.assert_allclose(target.wxyz_xyz, expected, atol=1e-15)
+    ctrl.set_frame_target(x, np.zeros(6))  # no rotation: the orientation is kept exactly
+    np.testing.assert_array_equal(ctrl.frame_task.transform_target_to_world.wxyz_xyz, x)
+
+
+def test_bounds_are_the_tighter_of_speed_and_joint_limits(scene) -> None:
+    ctrl = QPController(scene, DT)
+    w = ctrl.weights
+    rng = np.random.default_rng(9)
+    for _ in range(50):
+        q = rng.uniform(scene.q_min, scene.q_max)
+        lower, upper = ctrl.bounds(q)
+        q_hi = ctrl.configuration_limit.upper
+        q_lo = ctrl.configuration_limit.lower
+        np.testing.assert_array_equal(
+            upper, np.minimum(scene.v_max * DT, w.limit_gain * (q_hi - q))
+        )
+        np.testing.assert_array_equal(
+            lower, np.maximum(-scene.v_max * DT, -w.limit_gain * (q - q_lo))
+        )

@@ -337,3 +337,29 @@ def test_fast_pose_path_equals_pose_up_to_quaternion_sign() -> None:
         sign = 1.0 if a[:4] @ b[:4] >= 0 else -1.0
         np.testing.assert_allclose(b[:4] * sign, a[:4], atol=1e-12)
         np.testing.assert_allclose(b[4:], a[4:], atol=1e-12)
+
+
+@pytest.mark.parametrize("traj", TRAJECTORIES)
+def test_sample_equals_the_three_separate_calls(traj: PoseTrajectory) -> None:
+    """One lookup, same answers: bit for bit, at knots, between them, before and after."""
+    knots = [k.t for k in traj.keyframes]
+    times = list(np.linspace(traj.start_time - 1.0, traj.end_time + 1.0, 1501))
+    times += knots + [math.nextafter(t, -math.inf) for t in knots]
+    times += [math.nextafter(t, math.inf) for t in knots]
+    for t in map(float, times):
+        x_WG, V_WG, width = traj.sample(t)
+        np.testing.assert_array_equal(x_WG, traj.pose_wxyz_xyz(t))
+        np.testing.assert_array_equal(V_WG, traj.spatial_velocity(t))
+        assert width == traj.gripper_width(t)
+        assert x_WG.shape == (7,) and V_WG.shape == (6,) and isinstance(width, float)
+
+
+def test_sample_returns_new_arrays() -> None:
+    traj = TRAJECTORIES[0]
+    t = 0.5 * (traj.start_time + traj.end_time)
+    a, b = traj.sample(t), traj.sample(t)
+    assert not np.shares_memory(a[0], b[0]) and not np.shares_memory(a[1], b[1])
+    a[0][:] = 0.0
+    a[1][:] = 0.0
+    np.testing.assert_array_equal(traj.sample(t)[0], b[0])
+    np.testing.assert_array_equal(traj.sample(t)[1], b[1])
