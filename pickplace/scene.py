@@ -38,6 +38,7 @@ _OBJ_KIND = {
     mujoco.mjtObj.mjOBJ_GEOM: "geom",
     mujoco.mjtObj.mjOBJ_NUMERIC: "custom numeric",
     mujoco.mjtObj.mjOBJ_KEY: "keyframe",
+    mujoco.mjtObj.mjOBJ_SENSOR: "sensor",
 }
 
 _OBJ_COUNT = {
@@ -48,7 +49,12 @@ _OBJ_COUNT = {
     mujoco.mjtObj.mjOBJ_GEOM: "ngeom",
     mujoco.mjtObj.mjOBJ_NUMERIC: "nnumeric",
     mujoco.mjtObj.mjOBJ_KEY: "nkey",
+    mujoco.mjtObj.mjOBJ_SENSOR: "nsensor",
 }
+
+# Contact sensor fields the loop reads (bits of sensor_intprm[0]).
+_CONTACT_FOUND = 1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)
+_CONTACT_FORCE = 1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE)
 
 
 def names_of(model: mujoco.MjModel, obj: mujoco.mjtObj) -> list[str]:
@@ -80,6 +86,7 @@ class SceneNames:
     gripper_actuator: str = "wsg50/fingers"
     finger_joints: tuple[str, str] = ("wsg50/left_finger", "wsg50/right_finger")
     pad_geoms: tuple[str, str] = ("wsg50/left_pad", "wsg50/right_pad")
+    pad_force_sensors: tuple[str, str] = ("left_pad_force", "right_pad_force")
     tool_site: str = "wsg50/tool"
     flange_site: str = "attachment_site"
     brick_body: str = "brick"
@@ -185,6 +192,10 @@ class Scene:
         finger_outer_offset: Distance from a closed finger's inner pad face to its outer face
             along the closing axis [m]: an open finger reaches gap/2 + this from the centre.
         pad_geom_ids: Geoms of the left and right finger pads.
+        pad_force_sensor_adr: sensordata addresses of the left and right pad–brick contact
+            sensors; each holds ``pad_force_slots`` rows of [found, f_normal, f_t1, f_t2]
+            (force on the pad in the contact frame [N]).
+        pad_force_slots: Contacts each pad sensor reports.
         tool_site_id: Site at the grasp point, z along the approach direction.
         flange_site_id: Site at the arm's flange.
         brick_body_id: Free body of the brick.
@@ -216,6 +227,8 @@ class Scene:
     gripper_force_limit: float
     finger_outer_offset: float
     pad_geom_ids: tuple[int, int]
+    pad_force_sensor_adr: tuple[int, int]
+    pad_force_slots: int
     tool_site_id: int
     flange_site_id: int
     brick_body_id: int
@@ -287,6 +300,41 @@ def _finger_outer_offset(model: mujoco.MjModel, finger_joint: int) -> float:
     return extent
 
 
+def _pad_force_sensors(
+    model: mujoco.MjModel, names: SceneNames, pad_ids: tuple[int, int], brick_geom: int
+) -> tuple[tuple[int, int], int]:
+    """sensordata addresses of the two pad-force sensors and their number of contact slots.
+
+    Raises:
+        UnknownNameError: A sensor is missing.
+        SceneError: A sensor is not a ``found force`` contact sensor between its pad and the
+            brick, or the two report different numbers of contacts.
+    """
+    adr: list[int] = []
+    slots: list[int] = []
+    for name, pad in zip(names.pad_force_sensors, pad_ids, strict=True):
+        i = name_to_id(model, mujoco.mjtObj.mjOBJ_SENSOR, name)
+        fields, num = int(model.sensor_intprm[i, 0]), int(model.sensor_intprm[i, 2])
+        geoms = {int(model.sensor_objid[i]), int(model.sensor_refid[i])}
+        if (
+            model.sensor_type[i] != mujoco.mjtSensor.mjSENS_CONTACT
+            or fields != _CONTACT_FOUND | _CONTACT_FORCE
+            or model.sensor_objtype[i] != mujoco.mjtObj.mjOBJ_GEOM
+            or model.sensor_reftype[i] != mujoco.mjtObj.mjOBJ_GEOM
+            or geoms != {pad, brick_geom}
+        ):
+            pad_name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, pad)
+            raise SceneError(
+                f"sensor '{name}' must be <contact geom1=\"{pad_name}\" "
+                f'geom2="{names.brick_geom}" data="found force" num="N"/>'
+            )
+        adr.append(int(model.sensor_adr[i]))
+        slots.append(num)
+    if slots[0] != slots[1]:
+        raise SceneError(f"pad force sensors report different numbers of contacts: {slots}")
+    return (adr[0], adr[1]), slots[0]
+
+
 def compile_scene(path: Path) -> mujoco.MjModel:
     """Compile an MJCF file, turning every failure into a :class:`SceneError`."""
     path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
@@ -346,6 +394,7 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
     if model.geom_type[brick_geom] != mujoco.mjtGeom.mjGEOM_BOX:
         raise SceneError(f"brick geom '{names.brick_geom}' must be a box")
     home = name_to_id(model, obj.mjOBJ_KEY, names.home_key)
+    sensor_adr, slots = _pad_force_sensors(model, names, pad_ids, brick_geom)
 
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, home)
@@ -368,6 +417,8 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         gripper_force_limit=float(model.actuator_forcerange[grip_id, 1]),
         finger_outer_offset=_finger_outer_offset(model, finger_ids[0]),
         pad_geom_ids=pad_ids,
+        pad_force_sensor_adr=sensor_adr,
+        pad_force_slots=slots,
         tool_site_id=name_to_id(model, obj.mjOBJ_SITE, names.tool_site),
         flange_site_id=name_to_id(model, obj.mjOBJ_SITE, names.flange_site),
         brick_body_id=brick_body,
