@@ -136,9 +136,8 @@ class _ProgressObserver:
         self.progress.update(task.id, total=run.task.trajectory.end_time)
         self.progress.start()
 
-    def on_tick(self, run: Any, tick: int) -> None:
-        if tick % 10 == 0:
-            self.progress.update(self.progress.tasks[0].id, completed=tick * run.dt)
+    def on_ticks(self, run: Any, start: int, end: int) -> None:
+        self.progress.update(self.progress.tasks[0].id, completed=end * run.dt)
 
     def on_event(self, run: Any, event: Any) -> None:
         return None

@@ -11,7 +11,6 @@ Jacobian J (m × n, m ≤ n) with singular values σ₁ ≥ … ≥ σₘ:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,18 +18,26 @@ import numpy as np
 GRAVITY_W = np.array([0.0, 0.0, -9.81])
 
 
-def manipulability_measures(sigma: np.ndarray) -> tuple[float, float, float, float, float]:
-    """(condition, w1, w2, w3, w4) of singular values sorted in decreasing order."""
-    values = sigma.tolist()
-    smax, smin = values[0], values[-1]
-    prod = math.prod(values)
-    return (
-        smax / smin if smin > 0.0 else float("inf"),
-        prod,
-        smin / smax if smax > 0.0 else 0.0,
-        smin,
-        prod ** (1.0 / len(sigma)),
-    )
+def manipulability_measures(sigma: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(condition, w1, w2, w3, w4) of singular values sorted in decreasing order.
+
+    Args:
+        sigma: Singular values, shape (..., m), each row sorted in decreasing order; a stack
+            of rows (e.g. one per control tick) gives one measure per row.
+
+    Returns:
+        Five arrays of shape ``sigma.shape[:-1]`` (0-d for a single row): the condition number
+        σmax/σmin (inf where σmin = 0), w1 = Π σ, w2 = σmin/σmax (0 where σmax = 0),
+        w3 = σmin and w4 = (Π σ)^(1/m).
+    """
+    s = np.asarray(sigma, dtype=float)
+    smax, smin = s[..., 0], s[..., -1]
+    prod = np.prod(s, axis=-1)
+    condition = np.full(smin.shape, np.inf)
+    np.divide(smax, smin, out=condition, where=smin > 0.0)
+    w2 = np.zeros(smin.shape)
+    np.divide(smin, smax, out=w2, where=smax > 0.0)
+    return condition, prod, w2, smin.copy(), prod ** (1.0 / s.shape[-1])
 
 
 @dataclass(frozen=True)
@@ -57,7 +64,7 @@ class Manipulability:
     def from_singular_values(cls, sigma: np.ndarray) -> Manipulability:
         """Compute every measure from singular values (any order)."""
         s = np.sort(np.asarray(sigma, dtype=float))[::-1]
-        condition, w1, w2, w3, w4 = manipulability_measures(s)
+        condition, w1, w2, w3, w4 = (float(x) for x in manipulability_measures(s))
         return cls(singular_values=s, condition=condition, w1=w1, w2=w2, w3=w3, w4=w4)
 
     def as_array(self) -> np.ndarray:
@@ -97,5 +104,13 @@ def holding_torques(J: np.ndarray, mass: float, gravity_W: np.ndarray = GRAVITY_
 
     The load pulls on the tool with f = mass · g; the arm must push back with −f, so
     τ = Jᵥᵀ (−mass · g) (seed lecture 001: τ = Jᵀ F).
+
+    Args:
+        J: Spatial Jacobian [v; ω] in world, shape (6, n), or a stack (..., 6, n).
+        mass: Load [kg].
+        gravity_W: Gravity in world [m/s²].
+
+    Returns:
+        Torques, shape (n,) or (..., n) [N m].
     """
-    return J[:3].T @ (-mass * np.asarray(gravity_W))
+    return (-mass * np.asarray(gravity_W)) @ J[..., :3, :]

@@ -3,9 +3,10 @@
 :class:`Recorder` is a :class:`~pickplace.sim.TickObserver`. It writes to a ``.rrd`` file,
 a viewer it spawns, a viewer at a gRPC URL, or several of them at once. Tick data is never
 logged row by row: it is read from the run's preallocated :class:`~pickplace.sim.TickLog` and
-sent with ``send_columns`` every ``flush_every`` ticks and at the end, each batch followed by a
-flush, so an interrupted run keeps what was sent. The stream is closed in ``on_finish`` (also
-after Ctrl-C), which writes the file's footer.
+sent with ``send_columns`` every ``flush_every`` ticks (or sooner, once ``flush_interval_s`` of
+wall time has passed, so that a live viewer of a paced run stays current) and at the end, each
+batch followed by a flush, so an interrupted run keeps what was sent. The stream is closed in
+``on_finish`` (also after Ctrl-C), which writes the file's footer.
 
 Timelines: ``sim_time`` (duration, the simulated time at the end of the tick) and ``tick``
 (sequence, the control tick index k). Quaternions are stored xyzw. Lengths in m, angles in
@@ -66,6 +67,7 @@ the 3D scene on the left, health, tracking, joint, gripper plots and the event l
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -355,11 +357,15 @@ class Recorder:
         spawn: Also spawn a Rerun viewer and stream to it.
         connect: Also stream to a viewer at this gRPC URL
             (e.g. ``rerun+http://127.0.0.1:9876/proxy``).
-        flush_every: Ticks per ``send_columns`` batch (each batch is flushed).
+        flush_every: Ticks per ``send_columns`` batch (each batch is flushed). Every batch
+            costs the same ~35 calls whatever its length, so longer batches record faster.
+        flush_interval_s: Also send what is complete once this much wall time [s] has passed
+            since the last batch.
 
     Raises:
         RecordingError: No sink was given or a sink cannot be opened.
-        InvalidInputError: ``flush_every`` is not a positive integer.
+        InvalidInputError: ``flush_every`` is not a positive integer or ``flush_interval_s``
+            is not a positive number.
     """
 
     def __init__(
@@ -369,15 +375,22 @@ class Recorder:
         recording_id: str,
         spawn: bool = False,
         connect: str | None = None,
-        flush_every: int = 100,
+        flush_every: int = 200,
+        flush_interval_s: float = 0.25,
     ) -> None:
         if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 1:
             raise InvalidInputError(f"flush_every must be an integer >= 1, got {flush_every!r}")
+        if not (isinstance(flush_interval_s, int | float) and flush_interval_s > 0):
+            raise InvalidInputError(
+                f"flush_interval_s must be a number > 0 [s], got {flush_interval_s!r}"
+            )
         if path is None and not spawn and connect is None:
             raise RecordingError("a recording needs a file path, spawn=True or a connect URL")
         self.path = Path(path) if path is not None else None
         self.recording_id = recording_id
         self.flush_every = flush_every
+        self.flush_interval_s = float(flush_interval_s)
+        self._last_send = time.perf_counter()
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
         self.rec.set_log_time_enabled(False)
         self.rec.set_log_tick_enabled(False)
@@ -483,11 +496,16 @@ class Recorder:
         self._log_styles(run)
         self._flush()
 
-    def on_tick(self, run: Simulation, tick: int) -> None:
-        """Send a batch every ``flush_every`` ticks."""
-        if tick + 1 - self._sent >= self.flush_every and not self._closed:
-            self._send(run, tick + 1)
+    def on_ticks(self, run: Simulation, start: int, end: int) -> None:
+        """Send a batch once ``flush_every`` completed ticks are waiting, or once
+        ``flush_interval_s`` has passed since the last batch."""
+        if self._closed or end <= self._sent:
+            return
+        now = time.perf_counter()
+        if end - self._sent >= self.flush_every or now - self._last_send >= self.flush_interval_s:
+            self._send(run, end)
             self._flush()
+            self._last_send = time.perf_counter()
 
     def on_event(self, run: Simulation, event: Event) -> None:
         """Log the event at its tick (events are rare: plain ``log``)."""
@@ -503,7 +521,10 @@ class Recorder:
             return
         try:
             if self._started:
-                self._send(run, min(int(run.ticks), len(run.log.t)))
+                last = min(int(run.ticks), len(run.log.t))
+                self._send(run, last)
+                if last > 1:
+                    self._send_limit_rows(run.log, last - 1)
             summary = result.summary()
             if summary.get("recording") is None and self.path is not None:
                 summary["recording"] = str(self.path)
@@ -724,19 +745,20 @@ class Recorder:
         for path, values in plots:
             send(path, times, _scalar_columns(values))
 
-        # Constant limit lines: two rows per batch (its first and last tick).
-        ends = [start, end - 1] if end - start > 1 else [start]
+        if start == 0:
+            self._send_limit_rows(log, 0)
+
+    def _send_limit_rows(self, log: TickLog, tick: int) -> None:
+        """The constant limit lines get a row at the first and at the last tick only."""
         times = [
-            rr.TimeColumn("sim_time", duration=_ns(log.t[ends])),
-            rr.TimeColumn("tick", sequence=np.asarray(ends, dtype=np.int64)),
+            rr.TimeColumn("sim_time", duration=_ns(log.t[tick : tick + 1])),
+            rr.TimeColumn("tick", sequence=np.array([tick], dtype=np.int64)),
         ]
-        m = len(ends)
-        send(
-            "plots/joints/position_limits", times, _scalar_columns(np.tile(self._q_limits, (m, 1)))
-        )
+        send = self.rec.send_columns
+        send("plots/joints/position_limits", times, _scalar_columns(self._q_limits[None, :]))
         send(
             "plots/joints/position_normalized_limits",
             times,
-            _scalar_columns(np.tile([0.0, 1.0], (m, 1))),
+            _scalar_columns(np.array([[0.0, 1.0]])),
         )
-        send("plots/joints/speed_ratio_limit", times, _scalar_columns(np.ones(m)))
+        send("plots/joints/speed_ratio_limit", times, _scalar_columns(np.ones(1)))

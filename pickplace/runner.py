@@ -211,8 +211,8 @@ class Pacer:
     def on_start(self, run: Simulation) -> None:
         self._wall0 = time.perf_counter()
 
-    def on_tick(self, run: Simulation, tick: int) -> None:
-        due = self._wall0 + (tick + 1) * run.dt / self.factor
+    def on_ticks(self, run: Simulation, start: int, end: int) -> None:
+        due = self._wall0 + end * run.dt / self.factor
         delay = due - time.perf_counter()
         if delay > 0:
             time.sleep(delay)

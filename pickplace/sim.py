@@ -6,7 +6,13 @@ Each control tick (``SimConfig.control_rate_hz``, default 100 Hz):
 2. the controller turns them into joint velocities at the commanded configuration q_cmd;
 3. q_cmd is integrated from those velocities and sent to the arm's position actuators;
 4. MuJoCo steps the physics for one control period at the scene's timestep;
-5. the Jacobian's health, the tracking errors, the grasp and the brick are measured and stored.
+5. the commands, the IK's Jacobian and MuJoCo's state are copied into the tick log.
+
+Every :data:`ASSESS_PERIOD_S` of simulated time, the ticks stored since the last time are
+assessed together: the Jacobian's health (singular values, condition number, manipulability),
+the tracking errors, the grip force, the grasp and the limits are derived for each tick in one
+vectorised pass and checked in tick order. Every tick gets every diagnostic; doing them per
+block instead of per tick is what lets a run go many times faster than real time.
 
 The brick is held by contact friction only: nothing here welds, attaches or moves it, except an
 explicit fault injected by a scenario (:mod:`pickplace.faults`).
@@ -29,7 +35,7 @@ from mink.lie import SE3, SO3
 from pickplace.controllers import IK_STATUSES, DiffIKController, IKStatus
 from pickplace.diagnostics import holding_torques, manipulability_measures
 from pickplace.errors import InvalidInputError, require_positive
-from pickplace.kinematics import rotation_vector_W
+from pickplace.kinematics import rotation_angle
 from pickplace.scene import Scene
 from pickplace.trajectory import PoseTrajectory
 
@@ -120,7 +126,11 @@ class Event:
 
 
 class Fault(Protocol):
-    """A disturbance injected by a scenario (see :mod:`pickplace.faults`)."""
+    """A disturbance injected by a scenario (see :mod:`pickplace.faults`).
+
+    A fault acts on the simulated world (``run.model``, ``run.data``), never on the
+    controller: the commands of a block of ticks are computed before its physics.
+    """
 
     name: str
 
@@ -134,8 +144,8 @@ class TickObserver(Protocol):
     def on_start(self, run: Simulation) -> None:
         """The run is set up; nothing has been stepped."""
 
-    def on_tick(self, run: Simulation, tick: int) -> None:
-        """Tick ``tick`` has been stored in ``run.log``."""
+    def on_ticks(self, run: Simulation, start: int, end: int) -> None:
+        """Rows ``[start, end)`` of ``run.log`` are complete, derived quantities included."""
 
     def on_event(self, run: Simulation, event: Event) -> None:
         """An event happened."""
@@ -145,20 +155,43 @@ class TickObserver(Protocol):
 
 
 class TickLog:
-    """Preallocated per-tick arrays (one row per control tick)."""
+    """Preallocated per-tick arrays (one row per control tick).
 
-    def __init__(self, capacity: int, nbody: int) -> None:
+    The loop writes the raw rows (commands, plan, IK result, MuJoCo state) every tick; the
+    derived rows (singular values, manipulability, errors, grip force, slip, holding torque)
+    are filled in blocks by :meth:`Simulation.assess`, in one vectorised pass per block.
+    """
+
+    def __init__(self, capacity: int, nbody: int, nq: int, nsensordata: int) -> None:
         n = capacity
-        self.t = np.zeros(n)
+        # ---- raw, written by the loop every tick
+        self.t = np.zeros(n)  # time at the end of the tick [s]
         self.q_cmd = np.zeros((n, 7))
-        self.q = np.zeros((n, 7))
         self.qdot_cmd = np.zeros((n, 7))
-        self.p_WG_plan = np.zeros((n, 3))
-        self.quat_WG_plan = np.zeros((n, 4))  # wxyz
-        self.p_WG_cmd = np.zeros((n, 3))
-        self.quat_WG_cmd = np.zeros((n, 4))
+        self.x_WG_plan = np.zeros((n, 7))  # wxyz_xyz
+        self.x_WG_cmd = np.zeros((n, 7))  # wxyz_xyz: FK of the q the IK used
+        self.J_WG = np.zeros((n, 6, 7))  # tool Jacobian [v; ω] at that q
+        self.gripper_cmd = np.zeros(n)
+        self.ik_us = np.zeros(n)
+        self.ik_status = np.zeros(n, dtype=np.int8)
+        self.arm_ctrl = np.zeros((n, 7))  # position actuator targets q_cmd + (kv/kp) q̇_cmd
+        self.qpos = np.zeros((n, nq))
         self.p_WG = np.zeros((n, 3))
-        self.quat_WG = np.zeros((n, 4))
+        self.R_WG = np.zeros((n, 3, 3))
+        self.quat_WG = np.zeros((n, 4))  # wxyz
+        self.body_pos = np.zeros((n, nbody, 3))
+        self.body_quat = np.zeros((n, nbody, 4))  # wxyz
+        self.sensordata = np.zeros((n, nsensordata))
+        self.R_WG_flat = self.R_WG.reshape(n, 9)
+        # Views of the poses by part.
+        self.quat_WG_plan = self.x_WG_plan[:, :4]
+        self.p_WG_plan = self.x_WG_plan[:, 4:]
+        self.quat_WG_cmd = self.x_WG_cmd[:, :4]
+        self.p_WG_cmd = self.x_WG_cmd[:, 4:]
+        # ---- derived, filled per block
+        self.q = np.zeros((n, 7))
+        self.gripper_gap = np.zeros(n)
+        self.pad_force = np.zeros((n, 2))
         self.sigma = np.zeros((n, 6))
         self.sigma_t = np.zeros((n, 3))
         self.U_t = np.zeros((n, 3, 3))  # axes of the translational velocity ellipsoid
@@ -169,14 +202,10 @@ class TickLog:
         self.manipulability_t = np.zeros((n, 4))
         self.position_error = np.zeros(n)
         self.orientation_error = np.zeros(n)
-        self.gripper_cmd = np.zeros(n)
-        self.gripper_gap = np.zeros(n)
-        self.pad_force = np.zeros((n, 2))
+        self.command_error = np.zeros(n)  # planned vs commanded tool position [m]
+        self.speed_ratio = np.zeros(n)  # max over joints of |q̇_cmd| / q̇_max
+        self.limit_violation = np.zeros(n)  # largest distance of q or q_cmd past a limit [rad]
         self.holding_torque = np.zeros((n, 7))
-        self.ik_us = np.zeros(n)
-        self.ik_status = np.zeros(n, dtype=np.int8)
-        self.body_pos = np.zeros((n, nbody, 3))
-        self.body_quat = np.zeros((n, nbody, 4))  # wxyz
         self.slip = np.full(n, np.nan)
 
 
@@ -264,17 +293,33 @@ class Task:
 
 
 _STATUS_CODE = {status: IK_STATUSES.index(status.value) for status in IKStatus}
+_NO_SOLUTION = _STATUS_CODE[IKStatus.NO_SOLUTION]
+# The same, keyed by the members' ids: hashing an Enum member runs Python code.
+_STATUS_CODE_BY_ID = {id(status): code for status, code in _STATUS_CODE.items()}
+
+# Simulated time between two assessments of the log [s] (see :meth:`Simulation.assess`).
+ASSESS_PERIOD_S = 0.5
+
+# A failure found by a check: (tick, precedence within the tick, reason, text).
+_Candidate = tuple[int, int, str, str]
 
 
 class Simulation:
     """One run of a task with a controller; call :meth:`run`.
+
+    The loop works in blocks of ticks (:data:`ASSESS_PERIOD_S` of simulated time). Within a
+    block each tick only does what the physics needs (plan sample, IK, actuator command,
+    MuJoCo steps) and copies the raw state into :attr:`log`; at the end of the block
+    :meth:`assess` derives every diagnostic for all its ticks at once and runs the checks in
+    tick order. A failure is reported at the exact tick it happened, and the run still stops
+    ``failure_grace`` after it, because a block is never longer than the grace period.
 
     Args:
         scene: Loaded scene (its model may be modified by faults: load one per run).
         task: The task.
         controller: Differential-IK controller.
         config: Loop settings.
-        observers: Receive ticks and events (e.g. the recorder).
+        observers: Receive blocks of ticks and events (e.g. the recorder).
     """
 
     def __init__(
@@ -314,31 +359,43 @@ class Simulation:
         kp = self.model.actuator_gainprm[act, 0]
         kv = -self.model.actuator_biasprm[act, 2]
         self._ff = kv / kp if self.config.velocity_feedforward else np.zeros(7)
+        self._arm_ctrl = _as_slice(scene.arm_actuator_ids)
+        self._gripper_ctrl = scene.gripper_actuator_id
+        self._site = scene.tool_site_id
+        self._views = _DataViews(self.data)
+        autoreset_off = self.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        self._check_qacc = bool(autoreset_off)
+        self._sample = task.trajectory.sample
+        self._command = controller.command
 
         horizon = task.trajectory.end_time + self.criteria.settle_time + self.criteria.failure_grace
         self.max_ticks = int(np.ceil(horizon / self.dt)) + 2
-        self.log = TickLog(self.max_ticks, self.model.nbody)
+        self.log = TickLog(self.max_ticks, self.model.nbody, self.model.nq, self.model.nsensordata)
         self.ticks = 0
+        self.assessed = 0  # rows of the log that are complete
+        grace_ticks = round(self.criteria.failure_grace / self.dt)
+        self.block_ticks = max(1, min(round(ASSESS_PERIOD_S / self.dt), grace_ticks))
         self.events: list[Event] = []
         self.failure: str | None = None
         self.failure_tick: int | None = None
         self._stop_tick: int | None = None
+        self._nan: tuple[int, str] | None = None
         self._keyframe_times = [(k.t, k.name) for k in task.trajectory.keyframes]
         self._next_keyframe = 0
         self._grasp_state = "open"  # open → holding → released
         self._p_GO_grasp: np.ndarray | None = None
         self._contact_lost_since: float | None = None
-        self._f6 = np.zeros(6)
+        self._slots_warned = False
         brick_size = scene.brick_half_extents
         # Box corners in the brick frame, for the footprint and resting checks.
         signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
         self._corners_O = signs * brick_size
         self._brick_width = 2.0 * float(brick_size[1])
-        self._pad_pairs = [(pad, scene.brick_geom_id) for pad in scene.pad_geom_ids]
         self._time_expected = float(self.data.time)
-        self._eig, self._eigvec = np.empty(3), np.empty(9)
         self._inv_v_max = 1.0 / scene.v_max
         self._finger_adr = (int(scene.finger_qpos_adr[0]), int(scene.finger_qpos_adr[1]))
+        slots = scene.pad_force_slots
+        self._pad_sensors = [slice(a, a + 4 * slots) for a in scene.pad_force_sensor_adr]
         times = {kf.name: kf.t for kf in task.trajectory.keyframes}
         if task.goal == "place":
             names = [kf.name for kf in task.trajectory.keyframes]
@@ -364,21 +421,9 @@ class Simulation:
         return float(qpos[self._finger_adr[0]] + qpos[self._finger_adr[1]])
 
     def pad_forces(self) -> np.ndarray:
-        """Normal force [N] of the brick on the left and right pads."""
-        forces = np.zeros(2)
-        d = self.data
-        if d.ncon == 0:
-            return forces
-        geoms = d.contact.geom[: d.ncon]
-        for i, pair in enumerate(self._pad_pairs):
-            rows = np.flatnonzero(
-                ((geoms[:, 0] == pair[0]) & (geoms[:, 1] == pair[1]))
-                | ((geoms[:, 0] == pair[1]) & (geoms[:, 1] == pair[0]))
-            )
-            for row in rows:
-                mujoco.mj_contactForce(self.model, d, int(row), self._f6)
-                forces[i] += self._f6[0]
-        return forces
+        """Normal force [N] of the brick on the left and right pads (from the pad sensors)."""
+        sd = self.data.sensordata
+        return np.array([float(sd[s][1::4].sum()) for s in self._pad_sensors])
 
     def brick_touches_gripper(self) -> bool:
         """True if any geom of the gripper (or arm) touches the brick."""
@@ -392,30 +437,25 @@ class Simulation:
                     return True
         return False
 
-    def _p_GO(self) -> np.ndarray:
-        """Brick centre in the tool frame G [m]."""
-        d, site = self.data, self.scene.tool_site_id
-        R_WG = d.site_xmat[site].reshape(3, 3)
-        return R_WG.T @ (d.xpos[self.scene.brick_body_id] - d.site_xpos[site])
-
     # ------------------------------------------------------------------ events
 
-    def emit(self, kind: str, text: str, level: str = "info") -> None:
-        """Record an event at the current tick."""
-        tick = self.ticks
+    def emit(self, kind: str, text: str, level: str = "info", tick: int | None = None) -> None:
+        """Record an event at ``tick`` (default: the current tick)."""
+        tick = self.ticks if tick is None else tick
         event = Event(tick=tick, t=tick * self.dt, level=level, kind=kind, text=text)
         self.events.append(event)
         for obs in self.observers:
             obs.on_event(self, event)
 
-    def fail(self, reason: str, text: str) -> None:
-        """Record the first failure; the run stops ``failure_grace`` seconds later."""
+    def fail(self, reason: str, text: str, tick: int | None = None) -> None:
+        """Record the first failure; the run stops ``failure_grace`` seconds after its tick."""
         if self.failure is not None:
             return
+        tick = self.ticks if tick is None else tick
         self.failure = reason
-        self.failure_tick = self.ticks
-        self._stop_tick = self.ticks + round(self.criteria.failure_grace / self.dt)
-        self.emit("failure", f"{reason}: {text}", level="error")
+        self.failure_tick = tick
+        self._stop_tick = tick + round(self.criteria.failure_grace / self.dt)
+        self.emit("failure", f"{reason}: {text}", level="error", tick=tick)
 
     # ------------------------------------------------------------------ loop
 
@@ -429,15 +469,13 @@ class Simulation:
             obs.on_start(self)
         wall0 = time.perf_counter()
         interrupted = False
-        # MuJoCo's warnings become events instead of lines in ./MUJOCO_LOG.TXT.
-        previous_handler = mujoco.get_mju_user_warning()
-        mujoco.set_mju_user_warning(self._on_mujoco_warning)
         try:
-            self._loop()
+            self.advance(self.max_ticks)
         except KeyboardInterrupt:
             interrupted = True
-        finally:
-            mujoco.set_mju_user_warning(previous_handler)
+            # Complete the rows already simulated (idempotent), without judging them.
+            self._derive(self.assessed, self.ticks)
+            self.assessed = self.ticks
         wall = time.perf_counter() - wall0
         if interrupted:
             self.failure = "interrupted"
@@ -448,194 +486,331 @@ class Simulation:
             level = "info" if result.success else "error"
             verdict = "success" if result.success else f"failure: {result.failure}"
             self.emit("verdict", f"verdict: {verdict}", level=level)
-            result.events = list(self.events)
+            result.events = self._sorted_events()
         for obs in self.observers:
             obs.on_finish(self, result)
         return result
 
-    def _loop(self) -> None:
-        traj = self.task.trajectory
-        end = traj.end_time
+    def advance(self, ticks: int) -> None:
+        """Simulate up to ``ticks`` more control ticks, fewer if the run ends, and assess them.
+
+        Works block by block: the commands of a block's ticks (:meth:`_command_ticks`), then
+        its physics tick by tick (:meth:`_physics_tick`), then :meth:`assess`. The IK never
+        reads the simulated state (it integrates q_cmd open loop, like Drake's
+        DifferentialInverseKinematicsIntegrator, and faults act on the world only), so this
+        order gives exactly the run that interleaving IK and physics tick by tick gives,
+        while each phase keeps its own code and data in the CPU's caches.
+
+        Raises:
+            InvalidInputError: ``ticks`` is negative.
+        """
+        if ticks < 0:
+            raise InvalidInputError(f"ticks must be >= 0, got {ticks}")
+        limit = min(self.max_ticks, self.ticks + ticks)
+        end = self.task.trajectory.end_time
         settle_ticks = round(self.criteria.settle_time / self.dt)
         end_tick = int(np.ceil(end / self.dt - 1e-9))
-        while self.ticks < self.max_ticks:
-            k = self.ticks
-            if self._stop_tick is not None and k >= self._stop_tick:
-                break
-            if k > end_tick and (self._brick_at_rest() or k >= end_tick + settle_ticks):
-                break
-            self._tick(k, k * self.dt)
-            if self.failure == "nan":
-                self.ticks += 1
-                break
-            self.ticks += 1
+        # MuJoCo's warnings become events instead of lines in ./MUJOCO_LOG.TXT.
+        previous_handler = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(self._on_mujoco_warning)
+        try:
+            stopped = False
+            while self.ticks < limit and not stopped:
+                k0 = self.ticks
+                k1 = self._command_ticks(k0, min(k0 + self.block_ticks, limit))
+                for k in range(k0, k1):
+                    failed_and_shown = self._stop_tick is not None and k >= self._stop_tick
+                    settled = k > end_tick and (
+                        self._brick_at_rest() or k >= end_tick + settle_ticks
+                    )
+                    if failed_and_shown or settled:
+                        stopped = True
+                        break
+                    self._physics_tick(k)
+                    self.ticks = k + 1
+                    if self._nan is not None and self._nan[0] <= k:
+                        stopped = True
+                        break
+                # Commands past the last simulated tick are dropped.
+                if self.ticks > k0:
+                    self.q_cmd = self.log.q_cmd[self.ticks - 1].copy()
+                if self._nan is not None and self._nan[0] >= self.ticks:
+                    self._nan = None
+                self.assess()
+        finally:
+            mujoco.set_mju_user_warning(previous_handler)
 
-    def _tick(self, k: int, t: float) -> None:
-        sc, d, log = self.scene, self.data, self.log
-        traj = self.task.trajectory
+    def _command_ticks(self, k0: int, k1: int) -> int:
+        """Plan sample and IK for ticks ``[k0, k1)``, from ``q_cmd`` at ``k0``.
+
+        Writes the commands into the log and returns the end of the ticks commanded: ``k1``,
+        or one past a tick whose joint velocities were not finite (that tick commands no
+        motion and is the last one simulated).
+        """
+        log, dt, ff = self.log, self.dt, self._ff
+        sample, command = self._sample, self._command
+        q_cmd = self.q_cmd
+        for k in range(k0, k1):
+            t = k * dt
+            x_plan, V_plan, width = sample(t)
+            t0 = time.perf_counter_ns()
+            res = command(q_cmd, x_plan, V_plan)
+            log.ik_us[k] = (time.perf_counter_ns() - t0) * 1e-3
+            qdot = res.qdot
+            finite = math.isfinite(qdot.sum())
+            if not finite:
+                self._nan = (k, f"controller returned non-finite joint velocities at t={t:.3f} s")
+                qdot = np.zeros(7)
+            q_cmd = q_cmd + qdot * dt
+            log.x_WG_plan[k] = x_plan
+            log.x_WG_cmd[k] = res.x_WG
+            log.J_WG[k] = res.J_WG
+            log.q_cmd[k] = q_cmd
+            log.qdot_cmd[k] = qdot
+            log.arm_ctrl[k] = q_cmd + ff * qdot
+            log.gripper_cmd[k] = width
+            log.ik_status[k] = _STATUS_CODE_BY_ID[id(res.status)]
+            if not finite:
+                return k + 1
+        return k1
+
+    def _physics_tick(self, k: int) -> None:
+        """Physics of tick ``k``: faults, the tick's actuator commands, MuJoCo's steps, and
+        the simulated state copied into the log (see :meth:`assess` for what is derived)."""
+        log, v = self.log, self._views
         for fault in self.task.faults:
             text = fault.apply(self, k)
             if text:
                 self.emit("fault", f"fault '{fault.name}': {text}", level="warn")
-
-        x_plan = traj.pose_wxyz_xyz(t)
-        V_plan = traj.spatial_velocity(t)
-        t0 = time.perf_counter_ns()
-        res = self.controller.command(self.q_cmd, x_plan, V_plan)
-        ik_ns = time.perf_counter_ns() - t0
-        qdot = res.qdot
-        if not math.isfinite(float(qdot.sum())):
-            self.fail("nan", f"controller returned non-finite joint velocities at t={t:.3f} s")
-            qdot = np.zeros(7)
-        # The kinematics still hold the FK of the q_cmd the IK just used: the commanded frame.
-        log.p_WG_cmd[k] = self.controller.kinematics.p_WG()
-        mujoco.mju_mat2Quat(log.quat_WG_cmd[k], self.controller.kinematics.R_WG().ravel())
-        self.q_cmd = self.q_cmd + qdot * self.dt
-
-        # Jacobian health (seed notes 003): singular values of J and of its translational rows.
-        J = res.J_WG
-        sigma = np.linalg.svd(J, compute_uv=False)
-        # Translational ellipsoid: eigen-decomposition of J_v J_vᵀ = U Σ² Uᵀ. mju_eig3 returns
-        # eigenvalues in decreasing order and U as a proper rotation (columns = axes).
-        Jv = J[:3]
-        mujoco.mju_eig3(self._eig, self._eigvec, log.quat_t[k], (Jv @ Jv.T).ravel())
-        sigma_t = np.sqrt(np.maximum(self._eig, 0.0))
-        log.sigma[k] = sigma
-        log.sigma_t[k] = sigma_t
-        log.U_t[k] = self._eigvec.reshape(3, 3)
-        c, *w = manipulability_measures(sigma)
-        log.condition[k] = c
-        log.manipulability[k] = w
-        c, *w = manipulability_measures(sigma_t)
-        log.condition_t[k] = c
-        log.manipulability_t[k] = w
-
-        ctrl_gripper = traj.gripper_width(t)
-        d.ctrl[sc.arm_actuator_ids] = self.q_cmd + self._ff * qdot
-        d.ctrl[sc.gripper_actuator_id] = ctrl_gripper
-        for _ in range(self.substeps):
-            mujoco.mj_step(self.model, d)
-        # MuJoCo resets the data (time back to 0) after a NaN and counts a warning, so a state
-        # that stopped advancing in time is as bad as a non-finite one.
-        self._time_expected += self.substeps * self.model.opt.timestep
-        if abs(d.time - self._time_expected) > 1e-6 or not math.isfinite(float(d.qacc.sum())):
-            self.fail("nan", f"simulation state became non-finite at t={t:.3f} s")
-
-        # ---- store
-        site = sc.tool_site_id
-        p_WG = d.site_xpos[site]
-        quat_WG = log.quat_WG[k]
-        mujoco.mju_mat2Quat(quat_WG, d.site_xmat[site])
-        log.t[k] = t + self.dt
-        log.q_cmd[k] = self.q_cmd
-        log.q[k] = d.qpos[sc.arm_qpos_adr]
-        log.qdot_cmd[k] = qdot
-        log.p_WG_plan[k] = x_plan[4:]
-        log.quat_WG_plan[k] = x_plan[:4]
-        log.p_WG[k] = p_WG
-        dp = p_WG - x_plan[4:]
-        log.position_error[k] = math.sqrt(float(dp @ dp))
-        dw = rotation_vector_W(x_plan[:4], quat_WG)
-        log.orientation_error[k] = math.sqrt(float(dw @ dw))
-        log.gripper_cmd[k] = ctrl_gripper
-        log.gripper_gap[k] = self.gripper_gap()
-        forces = self.pad_forces()
-        log.pad_force[k] = forces
-        holding = self._grasp_state == "holding"
-        log.holding_torque[k] = holding_torques(J, sc.brick_mass) if holding else 0.0
-        log.ik_us[k] = ik_ns * 1e-3
-        log.ik_status[k] = _STATUS_CODE[res.status]
-        log.body_pos[k] = d.xpos
-        log.body_quat[k] = d.xquat
-
-        # ---- checks
-        if res.status is IKStatus.NO_SOLUTION:
-            self.fail("ik-failed", f"the QP found no solution at t={t:.3f} s")
-        e = res.error
-        cmd_error = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
-        if self.task.goal == "place" and cmd_error > self.criteria.tracking_limit:
-            self.fail(
-                "ik-failed",
-                f"commanded tool is {cmd_error * 1000:.1f} mm from the plan at t={t:.3f} s "
-                f"(limit {self.criteria.tracking_limit * 1000:.0f} mm; status {res.status.value})",
-            )
-        ratio = float((np.abs(qdot) * self._inv_v_max).max())
-        if ratio > 1.0 + SPEED_RATIO_TOLERANCE:
-            j = int(np.argmax(np.abs(qdot) / sc.v_max))
-            self.fail(
-                "limit-violated",
-                f"joint{j + 1} commanded at {abs(qdot[j]):.2f} rad/s, limit {sc.v_max[j]:.2f} "
-                f"rad/s ({ratio:.4f}x) at t={t:.3f} s",
-            )
-        over = self._limit_violation(log.q[k], log.q_cmd[k])
-        if over > POSITION_LIMIT_TOLERANCE:
-            self.fail("limit-violated", f"a joint is {over:.4f} rad past its limit at t={t:.3f} s")
-        self._keyframe_events(t + self.dt, k)
-        if self.task.goal == "place":
-            self._grasp_checks(t + self.dt, k, forces)
-        for obs in self.observers:
-            obs.on_tick(self, k)
+        v.ctrl[self._arm_ctrl] = log.arm_ctrl[k]
+        v.ctrl[self._gripper_ctrl] = log.gripper_cmd[k]
+        mujoco.mj_step(self.model, self.data, self.substeps)
+        # MuJoCo checks qpos, qvel and qacc every step and resets the data (time back to 0)
+        # on a non-finite value, so a clock that stopped advancing means a NaN; only with
+        # autoreset disabled must qacc be checked here.
+        self._time_expected += self.dt
+        bad = abs(self.data.time - self._time_expected) > 1e-6 or (
+            self._check_qacc and not math.isfinite(v.qacc.sum())
+        )
+        if bad and (self._nan is None or k < self._nan[0]):
+            self._nan = (k, f"simulation state became non-finite at t={k * self.dt:.3f} s")
+        log.qpos[k] = v.qpos
+        log.p_WG[k] = v.site_xpos[self._site]
+        log.R_WG_flat[k] = v.site_xmat[self._site]
+        log.body_pos[k] = v.xpos
+        log.body_quat[k] = v.xquat
+        log.sensordata[k] = v.sensordata
 
     def _on_mujoco_warning(self, message: str) -> None:
         self.emit("mujoco-warning", f"MuJoCo: {message}", level="warn")
 
-    def _limit_violation(self, q: np.ndarray, q_cmd: np.ndarray) -> float:
-        """Largest distance [rad] of ``q`` or ``q_cmd`` past a joint limit (0 inside)."""
-        sc = self.scene
-        return max(
-            0.0,
-            float((q - sc.q_max).max()),
-            float((sc.q_min - q).max()),
-            float((q_cmd - sc.q_max).max()),
-            float((sc.q_min - q_cmd).max()),
+    # ------------------------------------------------------------------ assessment
+
+    def assess(self) -> None:
+        """Derive the diagnostics of the ticks stored since the last call and judge them.
+
+        Checks run in tick order and, within a tick, in the order nan → ik-failed (no QP
+        solution, then tracking) → limit-violated (speed, then position) → grasp checks; only
+        the first failure of the run counts. Observers then receive the completed rows.
+        """
+        k0, k1 = self.assessed, self.ticks
+        if k1 <= k0:
+            return
+        self._derive(k0, k1)
+        self._keyframe_events(k0, k1)
+        candidates = self._limit_checks(k0, k1)
+        holding = np.zeros(k1 - k0, dtype=bool)
+        if self.task.goal == "place":
+            candidates += self._grasp_checks(k0, k1, holding)
+        log = self.log
+        log.holding_torque[k0:k1] = 0.0
+        if holding.any():
+            J = log.J_WG[k0:k1][holding]
+            log.holding_torque[k0:k1][holding] = holding_torques(J, self.scene.brick_mass)
+        if candidates:
+            tick, _, reason, text = min(candidates, key=lambda c: (c[0], c[1]))
+            self.fail(reason, text, tick=tick)
+        self.assessed = k1
+        for obs in self.observers:
+            obs.on_ticks(self, k0, k1)
+
+    def _derive(self, k0: int, k1: int) -> None:
+        """Fill the derived rows ``[k0, k1)`` of the log from its raw rows."""
+        if k1 <= k0:
+            return
+        log, sc = self.log, self.scene
+        sl = slice(k0, k1)
+        qpos = log.qpos[sl]
+        log.q[sl] = qpos[:, sc.arm_qpos_adr]
+        log.gripper_gap[sl] = qpos[:, self._finger_adr[0]] + qpos[:, self._finger_adr[1]]
+        log.t[sl] = np.arange(k0, k1) * self.dt + self.dt
+        found = np.zeros(k1 - k0)
+        for side, sensor in enumerate(self._pad_sensors):
+            rows = log.sensordata[sl, sensor]  # [found, f_normal, f_t1, f_t2] per slot
+            log.pad_force[sl, side] = rows[:, 1::4].sum(axis=1)
+            found = np.maximum(found, rows[:, 0])
+        over = np.flatnonzero(found > sc.pad_force_slots)
+        if over.size and not self._slots_warned:
+            self._slots_warned = True
+            self.emit(
+                "sensor",
+                f"a pad touched the brick in {int(found[over[0]])} points but its sensor "
+                f"reports {sc.pad_force_slots}: the grip force is underestimated",
+                level="warn",
+                tick=k0 + int(over[0]),
+            )
+        for k in range(k0, k1):
+            mujoco.mju_mat2Quat(log.quat_WG[k], log.R_WG_flat[k])
+
+        # Jacobian health (seed notes 003): singular values of J and of its translational rows.
+        J = log.J_WG[sl]
+        log.sigma[sl] = np.linalg.svd(J, compute_uv=False)
+        # Translational ellipsoid: eigen-decomposition of J_v J_vᵀ = U Σ² Uᵀ. mju_eig3 returns
+        # eigenvalues in decreasing order and U as a proper rotation (columns = axes).
+        Jv = J[:, :3]
+        JJt = Jv @ Jv.transpose(0, 2, 1)
+        eig = log.sigma_t[sl]
+        U = log.U_t[sl].reshape(-1, 9)
+        quat = log.quat_t[sl]
+        for i in range(k1 - k0):
+            mujoco.mju_eig3(eig[i], U[i], quat[i], JJt[i].reshape(9))
+        np.sqrt(np.maximum(eig, 0.0), out=eig)
+        c, *w = manipulability_measures(log.sigma[sl])
+        log.condition[sl] = c
+        log.manipulability[sl] = np.stack(w, axis=-1)
+        c, *w = manipulability_measures(eig)
+        log.condition_t[sl] = c
+        log.manipulability_t[sl] = np.stack(w, axis=-1)
+
+        log.position_error[sl] = np.linalg.norm(log.p_WG[sl] - log.p_WG_plan[sl], axis=1)
+        log.orientation_error[sl] = rotation_angle(log.quat_WG_plan[sl], log.quat_WG[sl])
+        log.command_error[sl] = np.linalg.norm(log.p_WG_plan[sl] - log.p_WG_cmd[sl], axis=1)
+        log.speed_ratio[sl] = (np.abs(log.qdot_cmd[sl]) * self._inv_v_max).max(axis=1)
+        q, q_cmd = log.q[sl], log.q_cmd[sl]
+        log.limit_violation[sl] = np.maximum.reduce(
+            [
+                np.zeros(k1 - k0),
+                (q - sc.q_max).max(axis=1),
+                (sc.q_min - q).max(axis=1),
+                (q_cmd - sc.q_max).max(axis=1),
+                (sc.q_min - q_cmd).max(axis=1),
+            ]
         )
 
-    def _keyframe_events(self, t: float, k: int) -> None:
-        while (
-            self._next_keyframe < len(self._keyframe_times)
-            and self._keyframe_times[self._next_keyframe][0] <= t + 1e-9
-        ):
+    def _limit_checks(self, k0: int, k1: int) -> list[_Candidate]:
+        """First tick of ``[k0, k1)`` at which each loop-level check fails."""
+        log, sc, dt = self.log, self.scene, self.dt
+        sl = slice(k0, k1)
+        out: list[_Candidate] = []
+
+        def first(mask: np.ndarray) -> int | None:
+            idx = np.flatnonzero(mask)
+            return k0 + int(idx[0]) if idx.size else None
+
+        if self._nan is not None and k0 <= self._nan[0] < k1:
+            out.append((self._nan[0], 0, "nan", self._nan[1]))
+        k = first(log.ik_status[sl] == _NO_SOLUTION)
+        if k is not None:
+            out.append((k, 1, "ik-failed", f"the QP found no solution at t={k * dt:.3f} s"))
+        limit = self.criteria.tracking_limit
+        if self.task.goal == "place":
+            k = first(log.command_error[sl] > limit)
+            if k is not None:
+                status = IK_STATUSES[int(log.ik_status[k])]
+                text = (
+                    f"commanded tool is {log.command_error[k] * 1000:.1f} mm from the plan at "
+                    f"t={k * dt:.3f} s (limit {limit * 1000:.0f} mm; status {status})"
+                )
+                out.append((k, 2, "ik-failed", text))
+        k = first(log.speed_ratio[sl] > 1.0 + SPEED_RATIO_TOLERANCE)
+        if k is not None:
+            qdot = log.qdot_cmd[k]
+            j = int(np.argmax(np.abs(qdot) * self._inv_v_max))
+            text = (
+                f"joint{j + 1} commanded at {abs(qdot[j]):.2f} rad/s, limit {sc.v_max[j]:.2f} "
+                f"rad/s ({log.speed_ratio[k]:.4f}x) at t={k * dt:.3f} s"
+            )
+            out.append((k, 3, "limit-violated", text))
+        k = first(log.limit_violation[sl] > POSITION_LIMIT_TOLERANCE)
+        if k is not None:
+            text = f"a joint is {log.limit_violation[k]:.4f} rad past its limit at t={k * dt:.3f} s"
+            out.append((k, 4, "limit-violated", text))
+        return out
+
+    def _keyframe_events(self, k0: int, k1: int) -> None:
+        """Emit 'keyframe reached' at the first tick whose end time passes each keyframe."""
+        times = self.log.t[k0:k1]
+        while self._next_keyframe < len(self._keyframe_times):
             kt, name = self._keyframe_times[self._next_keyframe]
+            i = int(np.searchsorted(times, kt - 1e-9))
+            if i >= len(times):
+                return
+            k = k0 + i
             self._next_keyframe += 1
             err = self.log.position_error[k]
             self.emit(
                 "keyframe",
                 f"keyframe '{name}' reached (planned t={kt:.2f} s, "
                 f"tool {err * 1000:.1f} mm from plan)",
+                tick=k,
             )
 
-    def _grasp_checks(self, t: float, k: int, forces: np.ndarray) -> None:
-        cr = self.criteria
+    def _grasp_checks(self, k0: int, k1: int, holding: np.ndarray) -> list[_Candidate]:
+        """Run the grasp state machine over ``[k0, k1)``; mark the ticks that start holding.
+
+        open → holding when the grip closes with both pads pressing firmly on a brick of the
+        right width (else missed-grasp); holding → released at the release keyframe, or
+        dropped if before placing the brick slips ``drop_slip`` in the gripper frame or loses
+        all pad contact for ``drop_contact_loss``.
+        """
+        cr, log = self.criteria, self.log
         t_grasp, t_place, t_release = self._grasp_times
-        if self._grasp_state == "open" and t >= t_grasp - 1e-9:
-            gap = self.gripper_gap()
-            firm = forces > cr.grasp_force_fraction * self.scene.gripper_force_limit
-            self.emit(
-                "grasp",
-                f"grip closed: gap {gap * 1000:.1f} mm, pad forces {forces[0]:.1f} / "
-                f"{forces[1]:.1f} N",
-            )
-            if gap < cr.grasp_gap_fraction * self._brick_width or not np.all(firm):
-                self.fail(
-                    "missed-grasp",
-                    f"after closing the finger gap is {gap * 1000:.1f} mm (brick "
-                    f"{self._brick_width * 1000:.0f} mm) and pad forces are {forces[0]:.1f} / "
-                    f"{forces[1]:.1f} N (need > "
-                    f"{cr.grasp_force_fraction * self.scene.gripper_force_limit:.0f} N each)",
+        sl = slice(k0, k1)
+        # Brick centre in the tool frame, p_GO = R_WGᵀ (p_WO − p_WG), for every tick.
+        p_WO = log.body_pos[sl, self.scene.brick_body_id]
+        p_GO_all = np.einsum("nji,nj->ni", log.R_WG[sl], p_WO - log.p_WG[sl])
+        forces = log.pad_force[sl]
+        touching: np.ndarray = np.any(forces > 0.0, axis=1)
+        times: list[float] = log.t[sl].tolist()
+        firm_force = cr.grasp_force_fraction * self.scene.gripper_force_limit
+        out: list[_Candidate] = []
+        slip: list[float] = []
+        if self._grasp_state == "holding" and self._p_GO_grasp is not None:
+            slip = np.linalg.norm(p_GO_all - self._p_GO_grasp, axis=1).tolist()
+        for i, t in enumerate(times):
+            k = k0 + i
+            state = self._grasp_state
+            if state == "released":
+                break
+            if state == "open":
+                if t < t_grasp - 1e-9:
+                    continue
+                gap = float(log.gripper_gap[k])
+                f = forces[i]
+                self.emit(
+                    "grasp",
+                    f"grip closed: gap {gap * 1000:.1f} mm, pad forces {f[0]:.1f} / {f[1]:.1f} N",
+                    tick=k,
                 )
-                self._grasp_state = "released"
-                return
-            self._grasp_state = "holding"
-            self._p_GO_grasp = self._p_GO()
-        elif self._grasp_state == "holding":
-            if self._p_GO_grasp is None:  # holding always starts with a grasp pose
-                return
-            p_GO = self._p_GO()
-            slip = float(np.linalg.norm(p_GO - self._p_GO_grasp))
+                if gap < cr.grasp_gap_fraction * self._brick_width or not (f > firm_force).all():
+                    text = (
+                        f"after closing the finger gap is {gap * 1000:.1f} mm (brick "
+                        f"{self._brick_width * 1000:.0f} mm) and pad forces are {f[0]:.1f} / "
+                        f"{f[1]:.1f} N (need > {firm_force:.0f} N each)"
+                    )
+                    out.append((k, 5, "missed-grasp", text))
+                    self._grasp_state = "released"
+                    break
+                self._grasp_state = "holding"
+                self._p_GO_grasp = p_GO_all[i].copy()
+                slip = np.linalg.norm(p_GO_all - self._p_GO_grasp, axis=1).tolist()
+                continue
+            # holding
+            holding[i] = True
+            s = slip[i]
             if t <= t_place + 1e-9:
-                self.log.slip[k] = slip
-            touching = bool(np.any(forces > 0.0))
-            if touching:
+                log.slip[k] = s
+            if touching[i]:
                 self._contact_lost_since = None
             elif self._contact_lost_since is None:
                 self._contact_lost_since = t
@@ -643,26 +818,32 @@ class Simulation:
                 self._contact_lost_since is not None
                 and t - self._contact_lost_since >= cr.drop_contact_loss - 1e-9
             )
-            if t < t_place - 1e-9 and (slip > cr.drop_slip or lost):
+            if t < t_place - 1e-9 and (s > cr.drop_slip or lost):
                 why = (
-                    f"it moved {slip * 1000:.0f} mm in the gripper frame"
-                    if slip > cr.drop_slip
+                    f"it moved {s * 1000:.0f} mm in the gripper frame"
+                    if s > cr.drop_slip
                     else f"no pad contact for {cr.drop_contact_loss:.2f} s"
                 )
-                self.emit("drop", f"brick left the gripper at t={t:.3f} s: {why}", level="error")
-                self.fail("dropped", f"brick left the gripper at t={t:.3f} s ({why})")
+                self.emit(
+                    "drop", f"brick left the gripper at t={t:.3f} s: {why}", level="error", tick=k
+                )
+                out.append((k, 5, "dropped", f"brick left the gripper at t={t:.3f} s ({why})"))
                 self._grasp_state = "released"
             elif t >= t_release - 1e-9:
                 self._grasp_state = "released"
-                self.emit("release", f"gripper opened: gap {self.gripper_gap() * 1000:.1f} mm")
+                gap = float(log.gripper_gap[k])
+                self.emit("release", f"gripper opened: gap {gap * 1000:.1f} mm", tick=k)
+        return out
 
     # ------------------------------------------------------------------ verdict
 
     def _brick_at_rest(self) -> bool:
-        v = self.data.qvel[self.scene.brick_dof_adr : self.scene.brick_dof_adr + 6]
+        a = self.scene.brick_dof_adr
+        v = self.data.qvel[a : a + 6]
+        cr = self.criteria
         return bool(
-            np.linalg.norm(v[:3]) < self.criteria.rest_speed
-            and np.linalg.norm(v[3:]) < self.criteria.rest_angular_speed
+            float(v[:3] @ v[:3]) < cr.rest_speed**2
+            and float(v[3:] @ v[3:]) < cr.rest_angular_speed**2
         )
 
     def placement_problems(self) -> list[str]:
@@ -693,8 +874,11 @@ class Simulation:
             problems.append(f"gripper not open (gap {self.gripper_gap() * 1000:.0f} mm)")
         return problems
 
+    def _sorted_events(self) -> list[Event]:
+        return sorted(self.events, key=lambda e: e.tick)
+
     def _result(self, wall: float) -> RunResult:
-        sc, log = self.scene, self.log
+        log = self.log
         X_WO = self.brick_pose()
         goal = self.task.X_WO_goal
         if self.failure is None and self.ticks > 0 and self.task.goal == "place":
@@ -706,26 +890,21 @@ class Simulation:
             self.failure = "interrupted"
         ticks = self.ticks
         sl = slice(0, ticks)
-        ratio = np.abs(log.qdot_cmd[sl]) / sc.v_max if ticks else np.zeros((1, 7))
-        viol = 0.0
-        for k in range(ticks):
-            viol = max(viol, self._limit_violation(log.q[k], log.q_cmd[k]))
         counts = {s: 0 for s in IK_STATUSES}
         for code, c in zip(*np.unique(log.ik_status[sl], return_counts=True), strict=True):
             counts[IK_STATUSES[int(code)]] = int(c)
         slip = log.slip[sl]
         slip = slip[np.isfinite(slip)]
         finite = lambda x: float(x) if np.isfinite(x) else None  # noqa: E731
-        sigma_min = float(log.sigma[sl, -1].min()) if ticks else float("nan")
         metrics: dict[str, Any] = {
             "place_error_m": (
                 float(np.linalg.norm(X_WO.translation() - goal.translation())) if goal else None
             ),
-            "min_singular_value": sigma_min,
+            "min_singular_value": float(log.sigma[sl, -1].min()) if ticks else float("nan"),
             "max_condition_number": finite(log.condition[sl].max()) if ticks else None,
             "min_manipulability_w1": float(log.manipulability[sl, 0].min()) if ticks else None,
-            "max_joint_speed_ratio": float(ratio.max()),
-            "max_joint_limit_violation_rad": viol,
+            "max_joint_speed_ratio": float(log.speed_ratio[sl].max()) if ticks else 0.0,
+            "max_joint_limit_violation_rad": float(log.limit_violation[sl].max()) if ticks else 0.0,
             "max_position_error_m": float(log.position_error[sl].max()) if ticks else 0.0,
             "max_orientation_error_rad": float(log.orientation_error[sl].max()) if ticks else 0.0,
             "max_slip_m": float(slip.max()) if slip.size else None,
@@ -747,6 +926,31 @@ class Simulation:
             brick_start_xyz=[float(x) for x in self.task.X_WO_start.translation()],
             brick_final_xyz=[float(x) for x in X_WO.translation()],
             target_xyz=[float(x) for x in goal.translation()] if goal else [],
-            events=list(self.events),
+            events=self._sorted_events(),
             metrics=metrics,
         )
+
+
+class _DataViews:
+    """NumPy views of the MjData arrays the loop touches every tick.
+
+    Each attribute access on MjData builds a new array object; these are built once (MjData
+    never reallocates its buffers, so the views stay valid for its lifetime).
+    """
+
+    def __init__(self, data: mujoco.MjData) -> None:
+        self.ctrl = data.ctrl
+        self.qpos = data.qpos
+        self.qacc = data.qacc
+        self.xpos = data.xpos
+        self.xquat = data.xquat
+        self.site_xpos = data.site_xpos
+        self.site_xmat = data.site_xmat
+        self.sensordata = data.sensordata
+
+
+def _as_slice(ids: np.ndarray) -> slice | np.ndarray:
+    """A slice for consecutive ids (cheaper indexing every tick), else the ids."""
+    if len(ids) and np.array_equal(ids, np.arange(ids[0], ids[0] + len(ids))):
+        return slice(int(ids[0]), int(ids[0]) + len(ids))
+    return ids

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -74,33 +75,26 @@ def read_entities(path: Path) -> dict[str, Entity]:
 def run_recorded(path: Path, *, stop_at: int | None = None) -> tuple[RunResult, Scene]:
     scene = load_scene()
     task = get_scenario("pick-place").build(scene, "pick-place", 0, None)
-    controller = make_controller("qp", scene, 0.01)
-    observers: list[Any] = []
     if stop_at is not None:
-        observers.append(_CtrlC(stop_at))
-    observers.append(Recorder(path, recording_id=RECORDING_ID, flush_every=100))
+        task = dataclasses.replace(task, faults=[_CtrlC(stop_at)])
+    controller = make_controller("qp", scene, 0.01)
+    observers: list[Any] = [Recorder(path, recording_id=RECORDING_ID, flush_every=100)]
     result = Simulation(scene, task, controller, observers=observers).run()
     return result, scene
 
 
 class _CtrlC:
-    """Observer that presses Ctrl-C at a given tick."""
+    """Presses Ctrl-C at the start of a given tick, as a SIGINT in the middle of a run would."""
+
+    name = "ctrl-c"
 
     def __init__(self, tick: int) -> None:
         self.tick = tick
 
-    def on_start(self, run: Simulation) -> None:
-        pass
-
-    def on_tick(self, run: Simulation, tick: int) -> None:
+    def apply(self, run: Simulation, tick: int) -> str | None:
         if tick == self.tick:
             raise KeyboardInterrupt
-
-    def on_event(self, run: Simulation, event: Any) -> None:
-        pass
-
-    def on_finish(self, run: Simulation, result: RunResult) -> None:
-        pass
+        return None
 
 
 @pytest.fixture(scope="module")
@@ -325,6 +319,8 @@ def test_a_sink_is_required_and_flush_every_is_checked(tmp_path: Path) -> None:
         Recorder(None, recording_id="x")
     with pytest.raises(InvalidInputError, match="flush_every"):
         Recorder(tmp_path / "a.rrd", recording_id="x", flush_every=0)
+    with pytest.raises(InvalidInputError, match="flush_interval_s"):
+        Recorder(tmp_path / "a.rrd", recording_id="x", flush_interval_s=0.0)
 
 
 def test_close_is_idempotent(tmp_path: Path) -> None:

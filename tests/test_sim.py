@@ -1,0 +1,96 @@
+"""The loop's block-wise assessment and its grip-force sensors, against their definitions."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+import pytest
+
+from pickplace.runner import RunRequest, prepare
+from pickplace.scene import SCENES_DIR
+from pickplace.sim import WALL_TIME_FIELDS, Simulation
+
+
+def _summary(sim: Simulation) -> dict[str, Any]:
+    summary = sim.run().summary()
+    for key in WALL_TIME_FIELDS:
+        summary.pop(key)
+    return summary
+
+
+@pytest.mark.parametrize(
+    ("scenario", "controller"),
+    [
+        ("pick-place", "qp"),
+        ("fault-knock", "qp"),
+        ("fault-gripper-disabled", "qp"),
+        ("singular-reach", "pinv"),
+    ],
+)
+def test_assessing_in_blocks_equals_assessing_every_tick(scenario: str, controller: str) -> None:
+    """Same verdict, failure tick, events and metrics with blocks of 1 tick and the default."""
+    _, _, blocked = prepare(RunRequest(scenario=scenario, controller=controller))
+    _, _, per_tick = prepare(RunRequest(scenario=scenario, controller=controller))
+    per_tick.block_ticks = 1
+    assert blocked.block_ticks > 1
+    a, b = _summary(blocked), _summary(per_tick)
+    assert a == b
+    n = blocked.ticks
+    for name in ("sigma", "manipulability_t", "orientation_error", "slip", "holding_torque"):
+        np.testing.assert_array_equal(
+            getattr(blocked.log, name)[:n], getattr(per_tick.log, name)[:n]
+        )
+
+
+def _contact_forces(sim: Simulation) -> np.ndarray:
+    """Normal force on each pad from MuJoCo's contact list (mj_contactForce)."""
+    m, d = sim.model, sim.data
+    out = np.zeros(2)
+    f6 = np.zeros(6)
+    for i in range(d.ncon):
+        pair = {int(d.contact.geom1[i]), int(d.contact.geom2[i])}
+        for side, pad in enumerate(sim.scene.pad_geom_ids):
+            if pair == {pad, sim.scene.brick_geom_id}:
+                mujoco.mj_contactForce(m, d, i, f6)
+                out[side] += f6[0]
+    return out
+
+
+def _grasp_tick(sim: Simulation) -> int:
+    t = next(k.t for k in sim.task.trajectory.keyframes if k.name == "grip-closed")
+    return round(t / sim.dt)
+
+
+def test_pad_sensors_equal_the_contact_forces_and_the_log_keeps_them() -> None:
+    _, _, sim = prepare(RunRequest())
+    sim.advance(_grasp_tick(sim) - 30)
+    seen = []
+    for _ in range(80):  # closing, squeezing and lifting
+        sim.advance(1)
+        expected = _contact_forces(sim)
+        np.testing.assert_allclose(sim.pad_forces(), expected, rtol=1e-12, atol=1e-9)
+        np.testing.assert_array_equal(sim.log.pad_force[sim.ticks - 1], sim.pad_forces())
+        seen.append(expected.min())
+    # The gripper's 40 N force limit is what squeezes once the pads touch.
+    assert max(seen) == pytest.approx(sim.scene.gripper_force_limit, rel=0.05)
+
+
+def test_too_few_sensor_slots_are_reported(tmp_path: Path) -> None:
+    """A pad sensor with 2 slots misses 2 of the 4 contact points: the loop says so."""
+    for f in SCENES_DIR.glob("*.xml"):
+        shutil.copy(f, tmp_path / f.name)
+    scene_xml = tmp_path / "scene.xml"
+    text = scene_xml.read_text()
+    assert text.count('num="8"') == 2
+    scene_xml.write_text(text.replace('num="8"', 'num="2"'))
+    _, _, sim = prepare(RunRequest(scene_path=scene_xml))
+    assert sim.scene.pad_force_slots == 2
+    sim.advance(_grasp_tick(sim) + 20)
+    warnings = [e for e in sim.events if e.kind == "sensor"]
+    assert len(warnings) == 1
+    assert "touched the brick in 4 points but its sensor reports 2" in warnings[0].text
+    assert sim.pad_forces().min() < 0.75 * _contact_forces(sim).min()
