@@ -2,7 +2,7 @@
 
 :class:`Recorder` is a :class:`~pickplace.sim.TickObserver`. It writes to a ``.rrd`` file,
 a viewer it spawns, a viewer at a gRPC URL, or several of them at once. Tick data is never
-logged row by row: it is read from the run's preallocated :class:`~pickplace.sim.TickLog` and
+logged row by row: it is read from the run's preallocated :class:`~pickplace.ticklog.TickLog` and
 sent with ``send_columns`` every ``flush_every`` ticks (or sooner, once ``flush_interval_s`` of
 wall time has passed, so that a live viewer of a paced run stays current) and at the end, each
 batch followed by a flush, so an interrupted run keeps what was sent. The stream is closed in
@@ -81,7 +81,8 @@ from pickplace.controllers import IK_STATUSES
 from pickplace.errors import InvalidInputError, RecordingError
 
 if TYPE_CHECKING:
-    from pickplace.sim import Event, RunResult, Simulation, TickLog
+    from pickplace.sim import Event, RunResult, Simulation
+    from pickplace.ticklog import TickLog
 
 APPLICATION_ID = "pickplace"
 SPAWN_PORT = 9876

@@ -6,13 +6,15 @@ Each control tick (``SimConfig.control_rate_hz``, default 100 Hz):
 2. the controller turns them into joint velocities at the commanded configuration q_cmd;
 3. q_cmd is integrated from those velocities and sent to the arm's position actuators;
 4. MuJoCo steps the physics for one control period at the scene's timestep;
-5. the commands, the IK's Jacobian and MuJoCo's state are copied into the tick log.
+5. the commands, the IK's Jacobian and MuJoCo's state are copied into the tick log
+   (:class:`~pickplace.ticklog.TickLog`).
 
-Every :data:`ASSESS_PERIOD_S` of simulated time, the ticks stored since the last time are
-assessed together: the Jacobian's health (singular values, condition number, manipulability),
-the tracking errors, the grip force, the grasp and the limits are derived for each tick in one
-vectorised pass and checked in tick order. Every tick gets every diagnostic; doing them per
-block instead of per tick is what lets a run go many times faster than real time.
+The loop runs in blocks of :data:`ASSESS_PERIOD_S` of simulated time: steps 1–3 for the
+block's ticks, then steps 4–5 tick by tick, then the block is assessed. Assessing derives
+every diagnostic of every tick in one vectorised pass (the Jacobian's health, the tracking
+errors, the grip force, the limits) and runs the checks in tick order, so failures keep their
+exact tick. Doing this per block instead of per tick is what lets a run go tens of times
+faster than real time; a block of one tick gives the identical run.
 
 The brick is held by contact friction only: nothing here welds, attaches or moves it, except an
 explicit fault injected by a scenario (:mod:`pickplace.faults`).
@@ -33,10 +35,10 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.controllers import IK_STATUSES, DiffIKController, IKStatus
-from pickplace.diagnostics import holding_torques, manipulability_measures
+from pickplace.diagnostics import holding_torques
 from pickplace.errors import InvalidInputError, require_positive
-from pickplace.kinematics import rotation_angle
 from pickplace.scene import Scene
+from pickplace.ticklog import TickLog
 from pickplace.trajectory import PoseTrajectory
 
 FAILURE_REASONS: tuple[str, ...] = (
@@ -152,61 +154,6 @@ class TickObserver(Protocol):
 
     def on_finish(self, run: Simulation, result: RunResult) -> None:
         """The run is over (also after an interruption or an error)."""
-
-
-class TickLog:
-    """Preallocated per-tick arrays (one row per control tick).
-
-    The loop writes the raw rows (commands, plan, IK result, MuJoCo state) every tick; the
-    derived rows (singular values, manipulability, errors, grip force, slip, holding torque)
-    are filled in blocks by :meth:`Simulation.assess`, in one vectorised pass per block.
-    """
-
-    def __init__(self, capacity: int, nbody: int, nq: int, nsensordata: int) -> None:
-        n = capacity
-        # ---- raw, written by the loop every tick
-        self.t = np.zeros(n)  # time at the end of the tick [s]
-        self.q_cmd = np.zeros((n, 7))
-        self.qdot_cmd = np.zeros((n, 7))
-        self.x_WG_plan = np.zeros((n, 7))  # wxyz_xyz
-        self.x_WG_cmd = np.zeros((n, 7))  # wxyz_xyz: FK of the q the IK used
-        self.J_WG = np.zeros((n, 6, 7))  # tool Jacobian [v; ω] at that q
-        self.gripper_cmd = np.zeros(n)
-        self.ik_us = np.zeros(n)
-        self.ik_status = np.zeros(n, dtype=np.int8)
-        self.arm_ctrl = np.zeros((n, 7))  # position actuator targets q_cmd + (kv/kp) q̇_cmd
-        self.qpos = np.zeros((n, nq))
-        self.p_WG = np.zeros((n, 3))
-        self.R_WG = np.zeros((n, 3, 3))
-        self.quat_WG = np.zeros((n, 4))  # wxyz
-        self.body_pos = np.zeros((n, nbody, 3))
-        self.body_quat = np.zeros((n, nbody, 4))  # wxyz
-        self.sensordata = np.zeros((n, nsensordata))
-        self.R_WG_flat = self.R_WG.reshape(n, 9)
-        # Views of the poses by part.
-        self.quat_WG_plan = self.x_WG_plan[:, :4]
-        self.p_WG_plan = self.x_WG_plan[:, 4:]
-        self.quat_WG_cmd = self.x_WG_cmd[:, :4]
-        self.p_WG_cmd = self.x_WG_cmd[:, 4:]
-        # ---- derived, filled per block
-        self.q = np.zeros((n, 7))
-        self.gripper_gap = np.zeros(n)
-        self.pad_force = np.zeros((n, 2))
-        self.sigma = np.zeros((n, 6))
-        self.sigma_t = np.zeros((n, 3))
-        self.U_t = np.zeros((n, 3, 3))  # axes of the translational velocity ellipsoid
-        self.quat_t = np.zeros((n, 4))  # the same rotation (det U_t = +1) as a wxyz quaternion
-        self.condition = np.zeros(n)
-        self.condition_t = np.zeros(n)
-        self.manipulability = np.zeros((n, 4))
-        self.manipulability_t = np.zeros((n, 4))
-        self.position_error = np.zeros(n)
-        self.orientation_error = np.zeros(n)
-        self.command_error = np.zeros(n)  # planned vs commanded tool position [m]
-        self.speed_ratio = np.zeros(n)  # max over joints of |q̇_cmd| / q̇_max
-        self.limit_violation = np.zeros(n)  # largest distance of q or q_cmd past a limit [rad]
-        self.holding_torque = np.zeros((n, 7))
-        self.slip = np.full(n, np.nan)
 
 
 @dataclass
@@ -370,7 +317,7 @@ class Simulation:
 
         horizon = task.trajectory.end_time + self.criteria.settle_time + self.criteria.failure_grace
         self.max_ticks = int(np.ceil(horizon / self.dt)) + 2
-        self.log = TickLog(self.max_ticks, self.model.nbody, self.model.nq, self.model.nsensordata)
+        self.log = TickLog(scene, self.max_ticks, self.dt)
         self.ticks = 0
         self.assessed = 0  # rows of the log that are complete
         grace_ticks = round(self.criteria.failure_grace / self.dt)
@@ -635,67 +582,20 @@ class Simulation:
             obs.on_ticks(self, k0, k1)
 
     def _derive(self, k0: int, k1: int) -> None:
-        """Fill the derived rows ``[k0, k1)`` of the log from its raw rows."""
-        if k1 <= k0:
-            return
-        log, sc = self.log, self.scene
-        sl = slice(k0, k1)
-        qpos = log.qpos[sl]
-        log.q[sl] = qpos[:, sc.arm_qpos_adr]
-        log.gripper_gap[sl] = qpos[:, self._finger_adr[0]] + qpos[:, self._finger_adr[1]]
-        log.t[sl] = np.arange(k0, k1) * self.dt + self.dt
-        found = np.zeros(k1 - k0)
-        for side, sensor in enumerate(self._pad_sensors):
-            rows = log.sensordata[sl, sensor]  # [found, f_normal, f_t1, f_t2] per slot
-            log.pad_force[sl, side] = rows[:, 1::4].sum(axis=1)
-            found = np.maximum(found, rows[:, 0])
-        over = np.flatnonzero(found > sc.pad_force_slots)
-        if over.size and not self._slots_warned:
+        """Fill the derived rows ``[k0, k1)`` of the log; warn once if a pad sensor missed
+        contacts (idempotent otherwise, so an interrupted run can complete its rows)."""
+        overflow = self.log.derive(k0, k1)
+        if overflow is not None and not self._slots_warned:
             self._slots_warned = True
+            tick, found = overflow
+            slots = self.scene.pad_force_slots
             self.emit(
                 "sensor",
-                f"a pad touched the brick in {int(found[over[0]])} points but its sensor "
-                f"reports {sc.pad_force_slots}: the grip force is underestimated",
+                f"a pad touched the brick in {found} points but its sensor reports {slots}: "
+                "the grip force is underestimated",
                 level="warn",
-                tick=k0 + int(over[0]),
+                tick=tick,
             )
-        for k in range(k0, k1):
-            mujoco.mju_mat2Quat(log.quat_WG[k], log.R_WG_flat[k])
-
-        # Jacobian health (seed notes 003): singular values of J and of its translational rows.
-        J = log.J_WG[sl]
-        log.sigma[sl] = np.linalg.svd(J, compute_uv=False)
-        # Translational ellipsoid: eigen-decomposition of J_v J_vᵀ = U Σ² Uᵀ. mju_eig3 returns
-        # eigenvalues in decreasing order and U as a proper rotation (columns = axes).
-        Jv = J[:, :3]
-        JJt = Jv @ Jv.transpose(0, 2, 1)
-        eig = log.sigma_t[sl]
-        U = log.U_t[sl].reshape(-1, 9)
-        quat = log.quat_t[sl]
-        for i in range(k1 - k0):
-            mujoco.mju_eig3(eig[i], U[i], quat[i], JJt[i].reshape(9))
-        np.sqrt(np.maximum(eig, 0.0), out=eig)
-        c, *w = manipulability_measures(log.sigma[sl])
-        log.condition[sl] = c
-        log.manipulability[sl] = np.stack(w, axis=-1)
-        c, *w = manipulability_measures(eig)
-        log.condition_t[sl] = c
-        log.manipulability_t[sl] = np.stack(w, axis=-1)
-
-        log.position_error[sl] = np.linalg.norm(log.p_WG[sl] - log.p_WG_plan[sl], axis=1)
-        log.orientation_error[sl] = rotation_angle(log.quat_WG_plan[sl], log.quat_WG[sl])
-        log.command_error[sl] = np.linalg.norm(log.p_WG_plan[sl] - log.p_WG_cmd[sl], axis=1)
-        log.speed_ratio[sl] = (np.abs(log.qdot_cmd[sl]) * self._inv_v_max).max(axis=1)
-        q, q_cmd = log.q[sl], log.q_cmd[sl]
-        log.limit_violation[sl] = np.maximum.reduce(
-            [
-                np.zeros(k1 - k0),
-                (q - sc.q_max).max(axis=1),
-                (sc.q_min - q).max(axis=1),
-                (q_cmd - sc.q_max).max(axis=1),
-                (sc.q_min - q_cmd).max(axis=1),
-            ]
-        )
 
     def _limit_checks(self, k0: int, k1: int) -> list[_Candidate]:
         """First tick of ``[k0, k1)`` at which each loop-level check fails."""

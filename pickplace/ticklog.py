@@ -1,0 +1,142 @@
+"""The record of a run, one row per control tick: what the loop stores, and what follows from it.
+
+The loop writes the *raw* rows every tick: the plan, the IK's result and commands, and the
+simulated state copied from MuJoCo. :meth:`TickLog.derive` then fills the *derived* rows of a
+block of ticks in one vectorised pass: the Jacobian's health (seed notes 003: singular values,
+condition number, manipulability w1–w4, the translational velocity ellipsoid), the tracking
+errors, the grip force, the speed and position limits. The grasp-dependent rows (``slip``,
+``holding_torque``) are filled by the simulation's grasp checks, which know the grasp state.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from pickplace.diagnostics import manipulability_measures
+from pickplace.kinematics import rotation_angle
+from pickplace.scene import Scene
+
+
+class TickLog:
+    """Preallocated per-tick arrays of one run.
+
+    Args:
+        scene: The scene the run simulates (sizes, addresses and limits).
+        capacity: Rows to allocate (the most ticks the run can take).
+        dt: Control period [s].
+    """
+
+    def __init__(self, scene: Scene, capacity: int, dt: float) -> None:
+        n, model = capacity, scene.model
+        self.scene = scene
+        self.dt = dt
+        # ---- raw, written by the loop every tick
+        self.q_cmd = np.zeros((n, 7))
+        self.qdot_cmd = np.zeros((n, 7))
+        self.x_WG_plan = np.zeros((n, 7))  # wxyz_xyz
+        self.x_WG_cmd = np.zeros((n, 7))  # wxyz_xyz: FK of the q the IK used
+        self.J_WG = np.zeros((n, 6, 7))  # tool Jacobian [v; ω] at that q
+        self.gripper_cmd = np.zeros(n)
+        self.ik_us = np.zeros(n)
+        self.ik_status = np.zeros(n, dtype=np.int8)
+        self.arm_ctrl = np.zeros((n, 7))  # position actuator targets q_cmd + (kv/kp) q̇_cmd
+        self.qpos = np.zeros((n, model.nq))
+        self.p_WG = np.zeros((n, 3))
+        self.R_WG = np.zeros((n, 3, 3))
+        self.R_WG_flat = self.R_WG.reshape(n, 9)
+        self.body_pos = np.zeros((n, model.nbody, 3))
+        self.body_quat = np.zeros((n, model.nbody, 4))  # wxyz
+        self.sensordata = np.zeros((n, model.nsensordata))
+        # Views of the poses by part.
+        self.quat_WG_plan = self.x_WG_plan[:, :4]
+        self.p_WG_plan = self.x_WG_plan[:, 4:]
+        self.quat_WG_cmd = self.x_WG_cmd[:, :4]
+        self.p_WG_cmd = self.x_WG_cmd[:, 4:]
+        # ---- derived, filled per block by derive()
+        self.t = np.zeros(n)  # time at the end of the tick [s]
+        self.q = np.zeros((n, 7))
+        self.quat_WG = np.zeros((n, 4))  # wxyz
+        self.gripper_gap = np.zeros(n)
+        self.pad_force = np.zeros((n, 2))
+        self.sigma = np.zeros((n, 6))
+        self.sigma_t = np.zeros((n, 3))
+        self.U_t = np.zeros((n, 3, 3))  # axes of the translational velocity ellipsoid
+        self.quat_t = np.zeros((n, 4))  # the same rotation (det U_t = +1) as a wxyz quaternion
+        self.condition = np.zeros(n)
+        self.condition_t = np.zeros(n)
+        self.manipulability = np.zeros((n, 4))
+        self.manipulability_t = np.zeros((n, 4))
+        self.position_error = np.zeros(n)
+        self.orientation_error = np.zeros(n)
+        self.command_error = np.zeros(n)  # planned vs commanded tool position [m]
+        self.speed_ratio = np.zeros(n)  # max over joints of |q̇_cmd| / q̇_max
+        self.limit_violation = np.zeros(n)  # largest distance of q or q_cmd past a limit [rad]
+        # ---- filled by the grasp checks
+        self.holding_torque = np.zeros((n, 7))
+        self.slip = np.full(n, np.nan)
+        # Constants of derive().
+        slots = scene.pad_force_slots
+        self._pad_sensors = [slice(a, a + 4 * slots) for a in scene.pad_force_sensor_adr]
+        self._fingers = (int(scene.finger_qpos_adr[0]), int(scene.finger_qpos_adr[1]))
+        self._inv_v_max = 1.0 / scene.v_max
+
+    def derive(self, k0: int, k1: int) -> tuple[int, int] | None:
+        """Fill the derived rows ``[k0, k1)`` from the raw ones (idempotent).
+
+        Returns:
+            ``(tick, contacts)`` of the first tick at which a pad touched the brick in more
+            points than its sensor reports (its grip force is then too low), else None.
+        """
+        if k1 <= k0:
+            return None
+        sc = self.scene
+        sl = slice(k0, k1)
+        qpos = self.qpos[sl]
+        self.t[sl] = np.arange(k0, k1) * self.dt + self.dt
+        self.q[sl] = qpos[:, sc.arm_qpos_adr]
+        self.gripper_gap[sl] = qpos[:, self._fingers[0]] + qpos[:, self._fingers[1]]
+        found = np.zeros(k1 - k0)
+        for side, sensor in enumerate(self._pad_sensors):
+            rows = self.sensordata[sl, sensor]  # [found, f_normal, f_t1, f_t2] per slot
+            self.pad_force[sl, side] = rows[:, 1::4].sum(axis=1)
+            found = np.maximum(found, rows[:, 0])
+        for k in range(k0, k1):
+            mujoco.mju_mat2Quat(self.quat_WG[k], self.R_WG_flat[k])
+
+        # Jacobian health: singular values of J and of its translational rows.
+        J = self.J_WG[sl]
+        self.sigma[sl] = np.linalg.svd(J, compute_uv=False)
+        # Translational ellipsoid: eigen-decomposition of J_v J_vᵀ = U Σ² Uᵀ. mju_eig3 returns
+        # eigenvalues in decreasing order and U as a proper rotation (columns = axes).
+        Jv = J[:, :3]
+        JJt = Jv @ Jv.transpose(0, 2, 1)
+        eig = self.sigma_t[sl]
+        U = self.U_t[sl].reshape(-1, 9)
+        quat = self.quat_t[sl]
+        for i in range(k1 - k0):
+            mujoco.mju_eig3(eig[i], U[i], quat[i], JJt[i].reshape(9))
+        np.sqrt(np.maximum(eig, 0.0), out=eig)
+        c, *w = manipulability_measures(self.sigma[sl])
+        self.condition[sl] = c
+        self.manipulability[sl] = np.stack(w, axis=-1)
+        c, *w = manipulability_measures(eig)
+        self.condition_t[sl] = c
+        self.manipulability_t[sl] = np.stack(w, axis=-1)
+
+        self.position_error[sl] = np.linalg.norm(self.p_WG[sl] - self.p_WG_plan[sl], axis=1)
+        self.orientation_error[sl] = rotation_angle(self.quat_WG_plan[sl], self.quat_WG[sl])
+        self.command_error[sl] = np.linalg.norm(self.p_WG_plan[sl] - self.p_WG_cmd[sl], axis=1)
+        self.speed_ratio[sl] = (np.abs(self.qdot_cmd[sl]) * self._inv_v_max).max(axis=1)
+        q, q_cmd = self.q[sl], self.q_cmd[sl]
+        self.limit_violation[sl] = np.maximum.reduce(
+            [
+                np.zeros(k1 - k0),
+                (q - sc.q_max).max(axis=1),
+                (sc.q_min - q).max(axis=1),
+                (q_cmd - sc.q_max).max(axis=1),
+                (sc.q_min - q_cmd).max(axis=1),
+            ]
+        )
+        over = np.flatnonzero(found > sc.pad_force_slots)
+        return (k0 + int(over[0]), int(found[over[0]])) if over.size else None
