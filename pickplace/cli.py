@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -99,7 +100,12 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--controller", default="qp")
     sweep.add_argument("--trials", type=_positive_int, default=20)
     sweep.add_argument("--seed", type=_seed, default=0, help="seed of the first trial")
-    sweep.add_argument("--workers", type=_positive_int, default=1)
+    sweep.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=os.cpu_count() or 1,
+        help="parallel processes (default: one per CPU)",
+    )
     sweep.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     return parser
 

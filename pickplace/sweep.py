@@ -11,7 +11,7 @@ import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -24,13 +24,14 @@ MAX_TRIALS = 100_000
 
 @dataclass(frozen=True)
 class SweepRequest:
-    """A sweep: ``trials`` runs of ``scenario`` with seeds ``first_seed …``."""
+    """A sweep: ``trials`` runs of ``scenario`` with seeds ``first_seed …`` on ``workers``
+    processes (default: one per CPU)."""
 
     scenario: str = "pick-place-random"
     controller: str = "qp"
     trials: int = 20
     first_seed: int = 0
-    workers: int = 1
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
 
     def validate(self) -> None:
         """Raise InvalidInputError / UnknownNameError for an invalid sweep."""
