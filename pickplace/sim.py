@@ -254,12 +254,12 @@ _Candidate = tuple[int, int, str, str]
 class Simulation:
     """One run of a task with a controller; call :meth:`run`.
 
-    The loop works in blocks of ticks (:data:`ASSESS_PERIOD_S` of simulated time). Within a
-    block each tick only does what the physics needs (plan sample, IK, actuator command,
-    MuJoCo steps) and copies the raw state into :attr:`log`; at the end of the block
-    :meth:`assess` derives every diagnostic for all its ticks at once and runs the checks in
-    tick order. A failure is reported at the exact tick it happened, and the run still stops
-    ``failure_grace`` after it, because a block is never longer than the grace period.
+    The loop works in blocks of ticks (:data:`ASSESS_PERIOD_S` of simulated time, see
+    :meth:`advance`): the block's commands (plan sample and IK), then its physics tick by tick
+    with the raw state copied into :attr:`log`, then :meth:`assess`, which derives every
+    diagnostic for all its ticks at once and runs the checks in tick order. A failure is
+    reported at the exact tick it happened, and the run still stops ``failure_grace`` after
+    it, because a block is never longer than the grace period.
 
     Args:
         scene: Loaded scene (its model may be modified by faults: load one per run).
