@@ -279,6 +279,28 @@ class Scene:
         """Names of the arm joints, base to flange."""
         return self.names.arm_joints
 
+    def finger_gap(self, qpos: np.ndarray) -> np.ndarray:
+        """Finger gap [m] (sum of the two finger joints) from qpos of shape (..., nq)."""
+        a, b = self.finger_qpos_adr
+        return np.asarray(qpos[..., a] + qpos[..., b])
+
+    def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
+        """The pad sensors' contact slots from sensordata of shape (..., nsensordata).
+
+        Returns:
+            Shape (..., 2, pad_force_slots, 4): left and right pad, one row per contact slot of
+            [found, f_normal, f_t1, f_t2] (contact count; force on the pad in the contact
+            frame [N]; unused slots are zero).
+        """
+        n = 4 * self.pad_force_slots
+        rows = [sensordata[..., a : a + n] for a in self.pad_force_sensor_adr]
+        return np.stack(rows, axis=-2).reshape(*sensordata.shape[:-1], 2, self.pad_force_slots, 4)
+
+    def pad_normal_forces(self, sensordata: np.ndarray) -> np.ndarray:
+        """Normal force [N] of the brick on the left and right pad, shape (..., 2), from
+        sensordata of shape (..., nsensordata)."""
+        return self.pad_sensor_rows(sensordata)[..., 1].sum(axis=-1)
+
     def make_data(self) -> mujoco.MjData:
         """Return fresh MjData reset to the home keyframe."""
         data = mujoco.MjData(self.model)

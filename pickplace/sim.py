@@ -339,10 +339,6 @@ class Simulation:
         self._corners_O = signs * brick_size
         self._brick_width = 2.0 * float(brick_size[1])
         self._time_expected = float(self.data.time)
-        self._inv_v_max = 1.0 / scene.v_max
-        self._finger_adr = (int(scene.finger_qpos_adr[0]), int(scene.finger_qpos_adr[1]))
-        slots = scene.pad_force_slots
-        self._pad_sensors = [slice(a, a + 4 * slots) for a in scene.pad_force_sensor_adr]
         times = {kf.name: kf.t for kf in task.trajectory.keyframes}
         if task.goal == "place":
             names = [kf.name for kf in task.trajectory.keyframes]
@@ -364,13 +360,11 @@ class Simulation:
 
     def gripper_gap(self) -> float:
         """Measured finger gap [m]."""
-        qpos = self.data.qpos
-        return float(qpos[self._finger_adr[0]] + qpos[self._finger_adr[1]])
+        return float(self.scene.finger_gap(self.data.qpos))
 
     def pad_forces(self) -> np.ndarray:
         """Normal force [N] of the brick on the left and right pads (from the pad sensors)."""
-        sd = self.data.sensordata
-        return np.array([float(sd[s][1::4].sum()) for s in self._pad_sensors])
+        return self.scene.pad_normal_forces(self.data.sensordata)
 
     def brick_touches_gripper(self) -> bool:
         """True if any geom of the gripper (or arm) touches the brick."""
@@ -625,7 +619,7 @@ class Simulation:
         k = first(log.speed_ratio[sl] > 1.0 + SPEED_RATIO_TOLERANCE)
         if k is not None:
             qdot = log.qdot_cmd[k]
-            j = int(np.argmax(np.abs(qdot) * self._inv_v_max))
+            j = int(np.argmax(np.abs(qdot) / sc.v_max))
             text = (
                 f"joint{j + 1} commanded at {abs(qdot[j]):.2f} rad/s, limit {sc.v_max[j]:.2f} "
                 f"rad/s ({log.speed_ratio[k]:.4f}x) at t={k * dt:.3f} s"

@@ -75,11 +75,7 @@ class TickLog:
         # ---- filled by the grasp checks
         self.holding_torque = np.zeros((n, 7))
         self.slip = np.full(n, np.nan)
-        # Constants of derive().
-        slots = scene.pad_force_slots
-        self._pad_sensors = [slice(a, a + 4 * slots) for a in scene.pad_force_sensor_adr]
-        self._fingers = (int(scene.finger_qpos_adr[0]), int(scene.finger_qpos_adr[1]))
-        self._inv_v_max = 1.0 / scene.v_max
+        self._inv_v_max = 1.0 / scene.v_max  # for derive()
 
     def derive(self, k0: int, k1: int) -> tuple[int, int] | None:
         """Fill the derived rows ``[k0, k1)`` from the raw ones (idempotent).
@@ -95,12 +91,10 @@ class TickLog:
         qpos = self.qpos[sl]
         self.t[sl] = np.arange(k0, k1) * self.dt + self.dt
         self.q[sl] = qpos[:, sc.arm_qpos_adr]
-        self.gripper_gap[sl] = qpos[:, self._fingers[0]] + qpos[:, self._fingers[1]]
-        found = np.zeros(k1 - k0)
-        for side, sensor in enumerate(self._pad_sensors):
-            rows = self.sensordata[sl, sensor]  # [found, f_normal, f_t1, f_t2] per slot
-            self.pad_force[sl, side] = rows[:, 1::4].sum(axis=1)
-            found = np.maximum(found, rows[:, 0])
+        self.gripper_gap[sl] = sc.finger_gap(qpos)
+        pads = sc.pad_sensor_rows(self.sensordata[sl])
+        self.pad_force[sl] = pads[..., 1].sum(axis=-1)
+        found = pads[:, :, 0, 0].max(axis=1)  # contacts counted, slot 0 of each pad
         for k in range(k0, k1):
             mujoco.mju_mat2Quat(self.quat_WG[k], self.R_WG_flat[k])
 
