@@ -152,11 +152,10 @@ class DiffIKController(ABC):
         w_x += k_R * e[3]
         w_y += k_R * e[4]
         w_z += k_R * e[5]
-        V_cmd_floats = (v_x, v_y, v_z, w_x, w_y, w_z)
         # One new array holds error, V_cmd and x_WG (three disjoint views): one allocation.
-        arrays = np.array((*e, *V_cmd_floats, *x_WG_floats))
+        arrays = np.array((*e, v_x, v_y, v_z, w_x, w_y, w_z, *x_WG_floats))
         error, V_cmd, x_WG = arrays[:6], arrays[6:12], arrays[12:]
-        qdot, status = self._solve(q, J, V_cmd, x_WG_floats, V_cmd_floats)
+        qdot, status = self._solve(q, J, V_cmd, x_WG)
         if status is IKStatus.OK:
             V_sq = v_x * v_x + v_y * v_y + v_z * v_z + w_x * w_x + w_y * w_y + w_z * w_z
             if V_sq > _REST_TWIST_SQ:
@@ -167,12 +166,7 @@ class DiffIKController(ABC):
 
     @abstractmethod
     def _solve(
-        self,
-        q: np.ndarray,
-        J: np.ndarray,
-        V_cmd: np.ndarray,
-        x_WG: Sequence[float],
-        V_cmd_floats: Sequence[float],
+        self, q: np.ndarray, J: np.ndarray, V_cmd: np.ndarray, x_WG: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
         """Joint velocities [rad/s] realising ``V_cmd`` and a status.
 
@@ -180,8 +174,7 @@ class DiffIKController(ABC):
             q: Joint positions [rad], loaded into :attr:`kinematics`.
             J: Tool Jacobian (6, 7) at q.
             V_cmd: Commanded tool spatial velocity [v; ω] in world [m/s, rad/s].
-            x_WG: Tool pose at q as floats [qw, qx, qy, qz, x, y, z] ([-], [m]).
-            V_cmd_floats: ``V_cmd`` as floats.
+            x_WG: Tool pose at q [qw, qx, qy, qz, x, y, z] ([-], [m]).
         """
 
 
@@ -200,12 +193,7 @@ class PinvController(DiffIKController):
         self.cutoff = require_positive("pinv cutoff", cutoff)
 
     def _solve(
-        self,
-        q: np.ndarray,
-        J: np.ndarray,
-        V_cmd: np.ndarray,
-        x_WG: Sequence[float],
-        V_cmd_floats: Sequence[float],
+        self, q: np.ndarray, J: np.ndarray, V_cmd: np.ndarray, x_WG: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
         U, s, Vt = np.linalg.svd(J, full_matrices=False)
         cutoff = self.cutoff  # > 0, so σ > cutoff also guards the division
@@ -229,12 +217,7 @@ class DLSController(DiffIKController):
         self._damping_sq_I = self.damping**2 * np.eye(6)
 
     def _solve(
-        self,
-        q: np.ndarray,
-        J: np.ndarray,
-        V_cmd: np.ndarray,
-        x_WG: Sequence[float],
-        V_cmd_floats: Sequence[float],
+        self, q: np.ndarray, J: np.ndarray, V_cmd: np.ndarray, x_WG: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
         JJt = J.dot(J.T)
         JJt += self._damping_sq_I
@@ -532,14 +515,9 @@ class QPController(DiffIKController):
         return qdot
 
     def _solve(
-        self,
-        q: np.ndarray,
-        J: np.ndarray,
-        V_cmd: np.ndarray,
-        x_WG: Sequence[float],
-        V_cmd_floats: Sequence[float],
+        self, q: np.ndarray, J: np.ndarray, V_cmd: np.ndarray, x_WG: np.ndarray
     ) -> tuple[np.ndarray, IKStatus]:
-        self.set_frame_target(x_WG, V_cmd_floats)
+        self.set_frame_target(x_WG, V_cmd)
         qdot = self._solve_qp(q)
         if qdot is None:
             return np.zeros_like(q), IKStatus.NO_SOLUTION
