@@ -31,16 +31,23 @@ def _targets(scene, rng: np.random.Generator, n: int):
         yield SE3.from_rotation_and_translation(dR @ X0.rotation(), p), rng.normal(0, 0.3, 6)
 
 
+def _step_both(a_ctrl, b_ctrl, q: np.ndarray, X, V, atol: float, same_status: bool = True):
+    """One command of each controller from the same state: equal joint velocities (and
+    statuses); returns the next q along the first controller's answer."""
+    a, b = a_ctrl.command(q, X, V), b_ctrl.command(q, X, V)
+    np.testing.assert_allclose(a.qdot, b.qdot, atol=atol)
+    if same_status:
+        assert a.status is b.status
+    return q + a.qdot * DT
+
+
 def test_fast_qp_equals_mink_solve_ik_on_the_same_problem(scene) -> None:
     fast = QPController(scene, DT, backend="fast")
     ref = QPController(scene, DT, backend="mink")
     rng = np.random.default_rng(0)
     q = scene.q_home.copy()
     for X, V in _targets(scene, rng, 300):
-        a, b = fast.command(q, X, V), ref.command(q, X, V)
-        np.testing.assert_allclose(a.qdot, b.qdot, atol=1e-8)
-        assert a.status is b.status
-        q = q + a.qdot * DT
+        q = _step_both(fast, ref, q, X, V, atol=1e-8)
 
 
 def test_fast_qp_matches_a_direct_mink_call(scene) -> None:
@@ -165,10 +172,7 @@ def test_fast_qp_follows_task_costs_gains_and_targets_changed_on_the_tasks(scene
         if k % 5 == 0 and k // 5 >= 1:
             for ctrl in (fast, ref):
                 changes[k // 5 - 1](ctrl)
-        a, b = fast.command(q, X, V), ref.command(q, X, V)
-        np.testing.assert_allclose(a.qdot, b.qdot, atol=1e-8)
-        assert a.status is b.status
-        q = q + a.qdot * DT
+        q = _step_both(fast, ref, q, X, V, atol=1e-8)
 
 
 def test_fast_qp_posture_through_mink_equals_the_hinge_shortcut(scene) -> None:
@@ -181,9 +185,7 @@ def test_fast_qp_posture_through_mink_equals_the_hinge_shortcut(scene) -> None:
     rng = np.random.default_rng(7)
     q = scene.q_home.copy()
     for X, V in _targets(scene, rng, 50):
-        a, b = shortcut.command(q, X, V), general.command(q, X, V)
-        np.testing.assert_allclose(a.qdot, b.qdot, atol=1e-10)
-        q = q + a.qdot * DT
+        q = _step_both(shortcut, general, q, X, V, atol=1e-10, same_status=False)
 
 
 def test_frame_target_is_one_tick_ahead_along_the_commanded_twist(scene) -> None:
