@@ -17,6 +17,7 @@ from typing import Any, NoReturn
 
 from pickplace.errors import PickPlaceError
 from pickplace.scenarios import SCENARIOS, BrickPlacement
+from pickplace.verdict import FailureReason
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -110,6 +111,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# The command-line option of each input a library error can name (InvalidInputError.field).
+OPTION_OF_FIELD = {
+    "scenario": "--scenario",
+    "controller": "--controller",
+    "seed": "--seed",
+    "brick": "--brick",
+    "scene_path": "--scene",
+    "record": "--record",
+    "connect": "--connect",
+    "control_rate_hz": "--control-rate",
+    "pace": "--pace",
+}
+
+
+def _error_text(exc: PickPlaceError) -> str:
+    """One line: the library's message, prefixed with the option it is about (if any)."""
+    text = " ".join(str(exc).split())
+    option = OPTION_OF_FIELD.get(getattr(exc, "field", None) or "")
+    return f"{option}: {text}" if option else text
+
+
 def _print_error(message: str) -> None:
     print(f"pickplace: error: {' '.join(str(message).split())}", file=sys.stderr)
 
@@ -200,7 +222,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(json.dumps(summary))
     else:
         print(_human_summary(summary))
-    if result.failure == "interrupted":
+    if result.failure is FailureReason.INTERRUPTED:
         return EXIT_INTERRUPTED
     return EXIT_OK if result.success else EXIT_FAILED
 
@@ -262,7 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         handlers = {"run": _cmd_run, "scenarios": _cmd_scenarios, "sweep": _cmd_sweep}
         return handlers[args.command](args)
     except PickPlaceError as exc:
-        _print_error(str(exc))
+        _print_error(_error_text(exc))
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("pickplace: interrupted", file=sys.stderr)

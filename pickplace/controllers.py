@@ -31,7 +31,8 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace.errors import ControllerError, UnknownNameError, require_positive
-from pickplace.kinematics import ArmKinematics, pose_error_W_floats
+from pickplace.geometry import pose_error_W_floats
+from pickplace.kinematics import ArmKinematics
 from pickplace.scene import Scene
 
 

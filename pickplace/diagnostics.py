@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 GRAVITY_W = np.array([0.0, 0.0, -9.81])
@@ -73,14 +74,75 @@ class Manipulability:
 
 
 @dataclass(frozen=True)
+class JacobianHealthRows:
+    """Jacobian health of a stack of Jacobians (one row per control tick).
+
+    Attributes:
+        sigma: Singular values (n, m) of the full Jacobians, decreasing.
+        sigma_t: Singular values (n, 3) of the translational rows J_v, decreasing.
+        U_t: Axes (n, 3, 3) of the translational velocity ellipsoid: eigenvectors of J_v J_vᵀ
+            as columns, ordered like ``sigma_t``, forming a proper rotation (det = +1).
+        quat_t: The same rotations as wxyz quaternions (n, 4).
+        condition: σmax/σmin of the full Jacobians (n,) (inf at a singularity).
+        manipulability: w1..w4 of the full Jacobians (n, 4).
+        condition_t: The same for the translational rows (n,).
+        manipulability_t: w1..w4 of the translational rows (n, 4).
+    """
+
+    sigma: np.ndarray
+    sigma_t: np.ndarray
+    U_t: np.ndarray
+    quat_t: np.ndarray
+    condition: np.ndarray
+    manipulability: np.ndarray
+    condition_t: np.ndarray
+    manipulability_t: np.ndarray
+
+
+def jacobian_health_rows(J: np.ndarray) -> JacobianHealthRows:
+    """Singular values, ellipsoid axes, condition and manipulability of each Jacobian.
+
+    The full Jacobian's singular values come from one batched SVD; the translational
+    ellipsoid from MuJoCo's ``mju_eig3`` on J_v J_vᵀ = U Σ² Uᵀ, which returns the
+    eigenvalues in decreasing order and U as a proper rotation with its quaternion.
+
+    Args:
+        J: Spatial Jacobians [v; ω] in world, shape (n, 6, nv).
+    """
+    J = np.asarray(J, dtype=np.float64)
+    n = J.shape[0]
+    sigma = np.linalg.svd(J, compute_uv=False)
+    Jv = J[:, :3]
+    JJt = Jv @ Jv.transpose(0, 2, 1)
+    eig = np.zeros((n, 3))
+    U = np.zeros((n, 9))
+    quat = np.zeros((n, 4))
+    for i in range(n):
+        mujoco.mju_eig3(eig[i], U[i], quat[i], JJt[i].reshape(9))
+    np.sqrt(np.maximum(eig, 0.0), out=eig)
+    c, *w = manipulability_measures(sigma)
+    c_t, *w_t = manipulability_measures(eig)
+    return JacobianHealthRows(
+        sigma=sigma,
+        sigma_t=eig,
+        U_t=U.reshape(n, 3, 3),
+        quat_t=quat,
+        condition=c,
+        manipulability=np.stack(w, axis=-1),
+        condition_t=c_t,
+        manipulability_t=np.stack(w_t, axis=-1),
+    )
+
+
+@dataclass(frozen=True)
 class JacobianHealth:
     """Health of the tool-site Jacobian at one configuration.
 
     Attributes:
-        full: Measures of the 6 × 7 Jacobian [v; ω].
-        translational: Measures of its 3 × 7 translational rows.
-        U_translational: Left singular vectors (3, 3) of the translational Jacobian, columns
-            ordered like ``translational.singular_values``: the axes of the velocity ellipsoid.
+        full: Measures of the 6 × n Jacobian [v; ω].
+        translational: Measures of its 3 × n translational rows.
+        U_translational: Axes (3, 3) of the translational velocity ellipsoid (columns ordered
+            like ``translational.singular_values``).
     """
 
     full: Manipulability
@@ -89,13 +151,13 @@ class JacobianHealth:
 
 
 def jacobian_health(J: np.ndarray) -> JacobianHealth:
-    """Compute the SVD-based health of a 6 × n spatial Jacobian [v; ω]."""
-    sigma = np.linalg.svd(J, compute_uv=False)
-    U_t, sigma_t, _ = np.linalg.svd(J[:3], full_matrices=False)
+    """The SVD-based health of one 6 × n spatial Jacobian [v; ω] (see
+    :func:`jacobian_health_rows`, which this evaluates on a stack of one)."""
+    rows = jacobian_health_rows(np.asarray(J)[None])
     return JacobianHealth(
-        full=Manipulability.from_singular_values(sigma),
-        translational=Manipulability.from_singular_values(sigma_t),
-        U_translational=U_t,
+        full=Manipulability.from_singular_values(rows.sigma[0]),
+        translational=Manipulability.from_singular_values(rows.sigma_t[0]),
+        U_translational=rows.U_t[0],
     )
 
 

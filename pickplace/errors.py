@@ -7,6 +7,7 @@ as a single line.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 
 
@@ -15,7 +16,16 @@ class PickPlaceError(Exception):
 
 
 class InvalidInputError(PickPlaceError, ValueError):
-    """A value given by the user or the caller is outside what is valid."""
+    """A value given by the user or the caller is outside what is valid.
+
+    Messages use the library's words (``control rate``, ``brick pose``); ``field`` names the
+    input they are about (e.g. ``"control_rate_hz"``, a :class:`~pickplace.runner.RunRequest`
+    field) so that a front end can say which of its options was wrong.
+    """
+
+    def __init__(self, message: str, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
 
 
 class SceneError(PickPlaceError):
@@ -51,17 +61,43 @@ class RecordingError(PickPlaceError):
     """A recording could not be opened or written."""
 
 
-def require_finite(name: str, value: float) -> float:
-    """Return ``value`` as float, or raise if it is NaN or infinite."""
-    v = float(value)
-    if v != v or v in (float("inf"), float("-inf")):
-        raise InvalidInputError(f"{name} must be a finite number, got {value!r}")
+def require_finite(
+    name: str, value: object, error: type[PickPlaceError] = InvalidInputError
+) -> float:
+    """Return ``value`` as float, or raise ``error`` if it is not a finite number.
+
+    Args:
+        name: How to call the value in the message, with its unit (e.g. ``"t [s]"``).
+        value: The value to check.
+        error: Exception class to raise (default :class:`InvalidInputError`).
+    """
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise error(f"{name} must be a finite number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise error(f"{name} must be a finite number, got {value!r}")
     return v
 
 
-def require_positive(name: str, value: float) -> float:
-    """Return ``value`` as float, or raise if it is not finite and > 0."""
-    v = require_finite(name, value)
-    if v <= 0.0:
-        raise InvalidInputError(f"{name} must be > 0, got {value!r}")
+def require_positive(
+    name: str, value: object, error: type[PickPlaceError] = InvalidInputError
+) -> float:
+    """Return ``value`` as float, or raise ``error`` if it is not a finite number > 0."""
+    try:
+        v = require_finite(name, value, error)
+    except PickPlaceError:
+        v = math.nan
+    if not v > 0.0:
+        raise error(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def require_non_negative(
+    name: str, value: object, error: type[PickPlaceError] = InvalidInputError
+) -> float:
+    """Return ``value`` as float, or raise ``error`` if it is not a finite number >= 0."""
+    v = require_finite(name, value, error)
+    if v < 0.0:
+        raise error(f"{name} must be >= 0, got {value!r}")
     return v

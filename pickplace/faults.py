@@ -1,21 +1,21 @@
 """Faults that scenarios inject to check that every failure gets its right verdict.
 
-Each fault acts on the running :class:`~pickplace.sim.Simulation` at a chosen tick and returns a
-text for the event log when it acts. None of them touches the verdict logic: they change the
-world, and the loop must notice.
+Each fault acts on the simulated world (:class:`~pickplace.task.World`) at a chosen tick and
+returns a text for the event log when it acts. None of them touches the verdict logic: they
+change the world, and the checks must notice. A fault that must act at a moment of the task
+reads it from the plan's phases, never from keyframe names.
+
+To add a fault scenario: a class here with ``name`` and ``apply(world, tick)``, a
+:class:`~pickplace.scenarios.Scenario` row with its expected outcome, and the README row.
 """
 
 from __future__ import annotations
-
-from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from pickplace.scene import Scene
-
-if TYPE_CHECKING:
-    from pickplace.sim import Simulation
+from pickplace.task import World
 
 
 class GripperDisabled:
@@ -26,11 +26,11 @@ class GripperDisabled:
     def __init__(self, scene: Scene) -> None:
         self.actuator = scene.gripper_actuator_id
 
-    def apply(self, run: Simulation, tick: int) -> str | None:
+    def apply(self, world: World, tick: int) -> str | None:
         if tick != 0:
             return None
-        run.model.actuator_gainprm[self.actuator, :] = 0.0
-        run.model.actuator_biasprm[self.actuator, :] = 0.0
+        world.model.actuator_gainprm[self.actuator, :] = 0.0
+        world.model.actuator_biasprm[self.actuator, :] = 0.0
         return "gripper actuator gain set to 0"
 
 
@@ -47,11 +47,11 @@ class BrickMoved:
     def __init__(self, scene: Scene) -> None:
         self.adr = scene.brick_qpos_adr
 
-    def apply(self, run: Simulation, tick: int) -> str | None:
+    def apply(self, world: World, tick: int) -> str | None:
         if tick != 0:
             return None
-        run.data.qpos[self.adr : self.adr + 3] += self.OFFSET_W
-        mujoco.mj_forward(run.model, run.data)
+        world.data.qpos[self.adr : self.adr + 3] += self.OFFSET_W
+        mujoco.mj_forward(world.model, world.data)
         return "brick moved by 0.08 m along x after planning"
 
 
@@ -64,22 +64,22 @@ class HeavyBrick:
     def __init__(self, scene: Scene) -> None:
         self.body = scene.brick_body_id
 
-    def apply(self, run: Simulation, tick: int) -> str | None:
+    def apply(self, world: World, tick: int) -> str | None:
         if tick != 0:
             return None
-        m = run.model
+        m = world.model
         scale = self.MASS / m.body_mass[self.body]
         m.body_mass[self.body] *= scale
         m.body_inertia[self.body] *= scale
-        mujoco.mj_setConst(m, run.data)
+        mujoco.mj_setConst(m, world.data)
         return f"brick mass set to {self.MASS:.0f} kg"
 
 
 class Knock:
     """A 300 N downward blow on the brick for 0.02 s while it is carried.
 
-    It lands halfway through the move from lift to the clearance via-point; 300 N far exceeds
-    the 80 N that friction at the pads can hold.
+    It lands halfway through the first motion of the plan's transport phase (the brick lifted,
+    on its way to the other bin); 300 N far exceeds the 80 N that friction at the pads can hold.
     """
 
     name = "knock"
@@ -90,14 +90,17 @@ class Knock:
         self.body = scene.brick_body_id
         self._t_hit: float | None = None
 
-    def apply(self, run: Simulation, tick: int) -> str | None:
+    def apply(self, world: World, tick: int) -> str | None:
         if self._t_hit is None:
-            times = {k.name: k.t for k in run.task.trajectory.keyframes}
-            self._t_hit = 0.5 * (times["lift"] + times["clearance"])
-        t = tick * run.dt
+            phases = world.plan.phases
+            if phases is None:
+                return None  # nothing is carried, nothing to knock
+            start = phases.transport[0]
+            self._t_hit = 0.5 * (start + world.plan.trajectory.next_keyframe_time(start))
+        t = tick * world.dt
         active = self._t_hit <= t < self._t_hit + self.DURATION
-        run.data.xfrc_applied[self.body, :3] = self.FORCE_W if active else 0.0
-        if active and t - run.dt < self._t_hit:
+        world.data.xfrc_applied[self.body, :3] = self.FORCE_W if active else 0.0
+        if active and t - world.dt < self._t_hit:
             return f"{-self.FORCE_W[2]:.0f} N downward blow on the brick for {self.DURATION} s"
         return None
 
@@ -111,8 +114,8 @@ class InjectNaN:
     def __init__(self, scene: Scene) -> None:
         self.dof = scene.brick_dof_adr
 
-    def apply(self, run: Simulation, tick: int) -> str | None:
-        if tick != round(self.TIME / run.dt):
+    def apply(self, world: World, tick: int) -> str | None:
+        if tick != round(self.TIME / world.dt):
             return None
-        run.data.qvel[self.dof] = np.nan
+        world.data.qvel[self.dof] = np.nan
         return "NaN written into the brick's velocity"

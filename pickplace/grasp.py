@@ -24,15 +24,10 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError
-from pickplace.trajectory import require_pose
+from pickplace.geometry import require_pose, wrap_angle
 
 _HORIZONTAL_TOL = 1e-9
 """Below this horizontal length [-], G's x axis is considered vertical in ``yaw_of``."""
-
-
-def wrap_angle(angle: float) -> float:
-    """Wrap an angle to [-π, π] [rad]."""
-    return math.remainder(angle, 2.0 * math.pi)
 
 
 def yaw_of(R_WG: SO3) -> float:

@@ -8,9 +8,6 @@ site's forward kinematics are identical to the simulation's.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Sequence
-
 import mink
 import mujoco
 import numpy as np
@@ -94,79 +91,3 @@ class ArmKinematics:
         J = np.empty((6, self.nv))
         mujoco.mj_jacSite(self.model, self.data, J[:3], J[3:], self.tool_site_id)
         return J
-
-
-def _rotation_vector_W(
-    qw: float, qx: float, qy: float, qz: float, tw: float, tx: float, ty: float, tz: float
-) -> tuple[float, float, float]:
-    """World-frame rotation vector [rad] taking quaternion q onto t (both wxyz, unit).
-
-    Plain float math: log(t ⊗ q⁻¹) on the short way round, i.e. with e = t ⊗ q⁻¹ = (w, v)
-    and w ≥ 0, the vector 2·atan2(‖v‖, w)·v/‖v‖ (zero when v is).
-    """
-    w = tw * qw + tx * qx + ty * qy + tz * qz
-    x = tx * qw - tw * qx - ty * qz + tz * qy
-    y = ty * qw - tw * qy - tz * qx + tx * qz
-    z = tz * qw - tw * qz - tx * qy + ty * qx
-    if w < 0.0:  # q and -q are the same rotation: take the short way round
-        w, x, y, z = -w, -x, -y, -z
-    norm = math.sqrt(x * x + y * y + z * z)
-    if norm == 0.0:
-        return 0.0, 0.0, 0.0
-    scale = 2.0 * math.atan2(norm, w) / norm
-    return scale * x, scale * y, scale * z
-
-
-def rotation_vector_W(quat_from: np.ndarray, quat_to: np.ndarray) -> np.ndarray:
-    """World-frame rotation vector [rad] of the shortest rotation taking ``quat_from`` to
-    ``quat_to`` (both wxyz): log(R_to R_fromᵀ), shape (3,)."""
-    qw, qx, qy, qz = quat_from.tolist()
-    tw, tx, ty, tz = quat_to.tolist()
-    return np.array(_rotation_vector_W(qw, qx, qy, qz, tw, tx, ty, tz))
-
-
-def pose_error_W_floats(
-    x_WG: Sequence[float], x_WG_target: Sequence[float]
-) -> tuple[float, float, float, float, float, float]:
-    """:func:`pose_error_W` in plain Python floats.
-
-    Args:
-        x_WG: Current pose [qw, qx, qy, qz, x, y, z] ([-], [m]).
-        x_WG_target: Target pose, same layout.
-
-    Returns:
-        Position error [m] (3 floats), then the world-frame rotation vector [rad] (3 floats).
-    """
-    qw, qx, qy, qz, px, py, pz = x_WG
-    tw, tx, ty, tz, p_tx, p_ty, p_tz = x_WG_target
-    wx, wy, wz = _rotation_vector_W(qw, qx, qy, qz, tw, tx, ty, tz)
-    return p_tx - px, p_ty - py, p_tz - pz, wx, wy, wz
-
-
-def pose_error_W(x_WG: np.ndarray, x_WG_target: np.ndarray) -> np.ndarray:
-    """Error (6,) between two poses given as wxyz_xyz vectors (see :meth:`SE3.wxyz_xyz`).
-
-    Returns [p_target − p; log(R_target Rᵀ)]: the position error [m] and the world-frame
-    rotation vector [rad] that takes R_WG onto R_WG_target. Plain float math (7-element NumPy
-    operations cost more in call overhead than in arithmetic); a new array.
-    """
-    return np.array(pose_error_W_floats(x_WG.tolist(), x_WG_target.tolist()))
-
-
-def rotation_angle(quat_a: np.ndarray, quat_b: np.ndarray) -> np.ndarray:
-    """Angle [rad] of the rotation between orientations ``quat_a`` and ``quat_b`` (wxyz).
-
-    Equal to ‖rotation_vector_W(quat_a, quat_b)‖, for single quaternions (4,) or stacks
-    (..., 4): with q = q_b ⊗ q_a⁻¹ = (w, v), the angle is 2·atan2(‖v‖, |w|) (q and −q are the
-    same rotation), accurate near 0 as well as near π.
-    """
-    a = np.asarray(quat_a, dtype=float)
-    b = np.asarray(quat_b, dtype=float)
-    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    w = aw * bw + ax * bx + ay * by + az * bz
-    # Vector part of q_b ⊗ q_a⁻¹: a_w b_v − b_w a_v + a_v × b_v.
-    vx = aw * bx - bw * ax + ay * bz - az * by
-    vy = aw * by - bw * ay + az * bx - ax * bz
-    vz = aw * bz - bw * az + ax * by - ay * bx
-    return 2.0 * np.arctan2(np.sqrt(vx * vx + vy * vy + vz * vz), np.abs(w))

@@ -16,66 +16,10 @@ import numpy as np
 import numpy.typing as npt
 from mink.lie import SE3, SO3
 
-from pickplace.errors import InvalidInputError, PlanError, require_finite, require_positive
-from pickplace.grasp import choose_grasp, choose_place_pose, wrap_angle
-from pickplace.trajectory import (
-    MotionProfile,
-    profile_by_name,
-    require_pose,
-    rotation_angle,
-    slerp,
-)
-
-
-def _finite(name: str, value: float) -> float:
-    try:
-        return require_finite(name, value)
-    except (InvalidInputError, TypeError, ValueError) as exc:
-        raise PlanError(f"{name} must be a finite number, got {value!r}") from exc
-
-
-def _positive(name: str, value: float) -> float:
-    try:
-        return require_positive(name, value)
-    except (InvalidInputError, TypeError, ValueError) as exc:
-        raise PlanError(f"{name} must be a finite number > 0, got {value!r}") from exc
-
-
-def _non_negative(name: str, value: float) -> float:
-    v = _finite(name, value)
-    if v < 0.0:
-        raise PlanError(f"{name} must be >= 0, got {value!r}")
-    return v
-
-
-@dataclass(frozen=True)
-class Keyframe:
-    """A pose the tool site passes through (at rest) at a given time.
-
-    Attributes:
-        name: Label used in logs, e.g. ``"pick"``.
-        t: Time [s].
-        X_WG: Pose of the tool site G in world (unit quaternion, copied on construction).
-        gripper_width: Commanded finger gap at this keyframe [m].
-    """
-
-    name: str
-    t: float
-    X_WG: SE3
-    gripper_width: float
-
-    def __post_init__(self) -> None:
-        """Validate and normalise the fields; raise PlanError naming the bad field."""
-        if not isinstance(self.name, str) or not self.name:
-            raise PlanError(f"keyframe name must be a non-empty string, got {self.name!r}")
-        label = f"keyframe '{self.name}'"
-        object.__setattr__(self, "t", _finite(f"{label} time t [s]", self.t))
-        require_pose(f"{label} X_WG", self.X_WG)
-        object.__setattr__(
-            self, "X_WG", SE3(wxyz_xyz=np.array(self.X_WG.wxyz_xyz, dtype=np.float64))
-        )
-        width = _non_negative(f"{label} gripper_width [m]", self.gripper_width)
-        object.__setattr__(self, "gripper_width", width)
+from pickplace.errors import PlanError, require_finite, require_non_negative, require_positive
+from pickplace.geometry import require_pose, rotation_angle, slerp, wrap_angle
+from pickplace.grasp import choose_grasp, choose_place_pose
+from pickplace.trajectory import Keyframe, MotionProfile, PoseTrajectory, profile_by_name
 
 
 @dataclass(frozen=True)
@@ -120,9 +64,9 @@ class PlanConfig:
                 continue
             value = getattr(self, f.name)
             if f.name in ("settle_time", "closed_width"):
-                checked = _non_negative(f.name, value)
+                checked = require_non_negative(f.name, value, PlanError)
             else:
-                checked = _positive(f.name, value)
+                checked = require_positive(f.name, value, PlanError)
             object.__setattr__(self, f.name, checked)
         if self.open_width <= self.closed_width:
             raise PlanError(
@@ -138,6 +82,61 @@ class PlanConfig:
 
 
 DEFAULT_PLAN_CONFIG = PlanConfig()
+
+
+@dataclass(frozen=True)
+class Phases:
+    """When the steps of a pick-and-place happen, on the plan's clock [s].
+
+    These times are what the run's checks, faults and validation need from a plan; none of them
+    reads keyframe names.
+
+    Attributes:
+        approach: (start, end) of the straight descent onto the grasp: the tool reaches the
+            pre-grasp pose at the start and the grasp pose at the end.
+        grip_closed: The grip must hold the brick from here on.
+        transport: (start, end) of the carry through the air: the brick has been lifted at the
+            start and is above its goal at the end.
+        place_reached: The brick is at its goal pose, still gripped.
+        release: The gripper has opened: the brick is let go.
+    """
+
+    approach: tuple[float, float]
+    grip_closed: float
+    transport: tuple[float, float]
+    place_reached: float
+    release: float
+
+    def __post_init__(self) -> None:
+        """Check that the phases follow each other; raise PlanError otherwise."""
+        order = [
+            ("approach start", self.approach[0]),
+            ("approach end", self.approach[1]),
+            ("grip_closed", self.grip_closed),
+            ("transport start", self.transport[0]),
+            ("transport end", self.transport[1]),
+            ("place_reached", self.place_reached),
+            ("release", self.release),
+        ]
+        for (name_a, a), (name_b, b) in itertools.pairwise(order):
+            if not (math.isfinite(a) and math.isfinite(b) and a <= b):
+                raise PlanError(f"phase {name_b} (t={b!r} s) must not precede {name_a} (t={a!r} s)")
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a run executes: the tool trajectory, and the phases of the task it carries out.
+
+    Attributes:
+        trajectory: Tool pose, spatial velocity and gripper width over time.
+        phases: When the brick is grasped, carried and released; None for a motion that
+            carries nothing (e.g. the singular reach).
+        X_OG: The grasp (tool frame in the brick frame) the plan uses, if it picks.
+    """
+
+    trajectory: PoseTrajectory
+    phases: Phases | None = None
+    X_OG: SE3 | None = None
 
 
 @dataclass(frozen=True)
@@ -158,9 +157,13 @@ class Waypoint:
     min_duration: float = 0.0
 
     def __post_init__(self) -> None:
-        """Validate ``min_duration``; the other fields are checked by Keyframe."""
+        """Validate the pose and ``min_duration`` (the name and width are checked by the
+        Keyframe that :func:`time_keyframes` makes of it)."""
+        require_pose(f"waypoint '{self.name}' X_WG", self.X_WG)
         label = f"waypoint '{self.name}' min_duration [s]"
-        object.__setattr__(self, "min_duration", _non_negative(label, self.min_duration))
+        object.__setattr__(
+            self, "min_duration", require_non_negative(label, self.min_duration, PlanError)
+        )
 
 
 def segment_duration(X_a: SE3, X_b: SE3, config: PlanConfig = DEFAULT_PLAN_CONFIG) -> float:
@@ -193,8 +196,6 @@ def time_keyframes(
     """
     if len(waypoints) < 2:
         raise PlanError(f"waypoints must contain at least 2 entries, got {len(waypoints)}")
-    for w in waypoints:
-        require_pose(f"waypoint '{w.name}' X_WG", w.X_WG)
     t = 0.0
     keyframes = [Keyframe(waypoints[0].name, t, waypoints[0].X_WG, waypoints[0].gripper_width)]
     for prev, w in itertools.pairwise(waypoints):
@@ -230,7 +231,7 @@ def _swung(X_WG: SE3, p_W_to: np.ndarray, p_W_base: np.ndarray | None) -> SE3:
     return SE3.from_rotation(SO3.from_z_radians(swing)) @ X_WG
 
 
-def make_pick_place_keyframes(
+def plan_pick_place(
     X_WG_initial: SE3,
     X_WO_pick: SE3,
     X_WO_place: SE3,
@@ -238,8 +239,8 @@ def make_pick_place_keyframes(
     config: PlanConfig = DEFAULT_PLAN_CONFIG,
     grasp_height: float = 0.0,
     p_W_base: npt.ArrayLike | None = None,
-) -> list[Keyframe]:
-    """Timed keyframes that pick the brick at ``X_WO_pick`` and place it at ``X_WO_place``.
+) -> Plan:
+    """A plan that picks the brick at ``X_WO_pick`` and places it at ``X_WO_place``.
 
     Keyframes, in order: ``initial``, ``pre-pick`` (pick backed off by ``approach_distance``
     along the approach axis, i.e. up), ``pick``, ``settle`` (same pose, ``settle_time`` later;
@@ -265,13 +266,17 @@ def make_pick_place_keyframes(
             relative to the tool yaw carried along by the base rotation, so the wrist does not
             wind up.
 
+    Returns:
+        The trajectory through the timed keyframes, the phases (approach: pre-pick → pick;
+        grip closed; transport: lift → pre-place; place reached; release) and the grasp X_OG.
+
     Raises:
         PlanError: Invalid input.
     """
     require_pose("X_WG_initial", X_WG_initial)
     require_pose("X_WO_pick", X_WO_pick)
     require_pose("X_WO_place", X_WO_place)
-    clearance_z = _finite("clearance_z [m]", clearance_z)
+    clearance_z = require_finite("clearance_z [m]", clearance_z, PlanError)
 
     base = None if p_W_base is None else np.asarray(p_W_base, dtype=np.float64)
     X_OG = choose_grasp(
@@ -316,4 +321,13 @@ def make_pick_place_keyframes(
         Waypoint("release", X_WG_place, w_open, config.open_time),
         Waypoint("retreat", _backed_off(X_WG_place, config.approach_distance), w_open),
     ]
-    return time_keyframes(waypoints, config)
+    keyframes = time_keyframes(waypoints, config)
+    t = {k.name: k.t for k in keyframes}  # the names this function itself just gave
+    phases = Phases(
+        approach=(t["pre-pick"], t["pick"]),
+        grip_closed=t["grip-closed"],
+        transport=(t["lift"], t["pre-place"]),
+        place_reached=t["place"],
+        release=t["release"],
+    )
+    return Plan(PoseTrajectory(keyframes, config.profile), phases, X_OG)

@@ -81,8 +81,10 @@ from pickplace.controllers import IK_STATUSES
 from pickplace.errors import InvalidInputError, RecordingError
 
 if TYPE_CHECKING:
-    from pickplace.sim import Event, RunResult, Simulation
+    from pickplace.events import Event
+    from pickplace.sim import Simulation
     from pickplace.ticklog import TickLog
+    from pickplace.verdict import RunResult
 
 APPLICATION_ID = "pickplace"
 SPAWN_PORT = 9876

@@ -24,7 +24,9 @@ from pickplace.scenarios import (
     get_scenario,
 )
 from pickplace.scene import Scene, load_scene
-from pickplace.sim import RunResult, SimConfig, Simulation, Task, TickObserver
+from pickplace.sim import SimConfig, Simulation, TickObserver
+from pickplace.task import Task
+from pickplace.verdict import RunResult
 
 CONTROL_RATE_RANGE_HZ = (100.0, 1000.0)
 PACE_RANGE = (0.01, 1000.0)
@@ -154,8 +156,9 @@ def check_reachable(scene: Scene, X_WG_targets: Sequence[tuple[str, SE3]]) -> No
             q = q + res.qdot * dt
         else:
             raise InvalidInputError(
-                f"--brick is unreachable: the arm gets no closer than "
-                f"{np.linalg.norm(err[:3]) * 1000:.0f} mm to the {name} pose"
+                f"the brick pose is unreachable: the arm gets no closer than "
+                f"{np.linalg.norm(err[:3]) * 1000:.0f} mm to the {name} pose",
+                field="brick",
             )
 
 
@@ -171,9 +174,14 @@ def prepare(req: RunRequest) -> tuple[Scene, Task, Simulation]:
     if req.brick is not None:
         check_brick_in_source_bin(scene, req.brick)
     task = scenario.build(scene, scenario.name, req.seed, req.brick)
-    if req.brick is not None:
-        poses = {k.name: k.X_WG for k in task.trajectory.keyframes}
-        check_reachable(scene, [("pre-pick", poses["pre-pick"]), ("pick", poses["pick"])])
+    phases = task.plan.phases
+    if req.brick is not None and phases is not None:
+        sample = task.plan.trajectory.sample
+        targets = [
+            (name, SE3(sample(t)[0]))
+            for name, t in zip(("pre-grasp", "grasp"), phases.approach, strict=True)
+        ]
+        check_reachable(scene, targets)
     config = SimConfig(control_rate_hz=req.control_rate_hz)
     dt = 1.0 / req.control_rate_hz
     controller = make_controller(req.controller, scene, dt)

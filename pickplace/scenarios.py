@@ -1,13 +1,17 @@
-"""Named scenarios: each builds a :class:`~pickplace.sim.Task` from a scene and a seed.
+"""Named scenarios: each builds a :class:`~pickplace.task.Task` from a scene and a seed.
 
 ``pickplace scenarios`` lists them; ``pickplace run --scenario NAME`` runs one; the pytest suite
-checks each one's expected outcome.
+runs every scenario and checks its documented outcome (:attr:`Scenario.expected`).
+
+To add a scenario: a builder function here and a :class:`Scenario` row in :data:`SCENARIOS`
+(with its expected outcome per controller), and the README's scenario table row; the
+parametrised test picks it up.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,11 +19,13 @@ from mink.lie import SE3
 
 from pickplace import faults
 from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.geometry import box_corners, transform_points
+from pickplace.goals import PlaceGoal, ReachGoal
 from pickplace.grasp import brick_pose, top_down_rotation, yaw_of
 from pickplace.kinematics import ArmKinematics
-from pickplace.plan import PlanConfig, Waypoint, make_pick_place_keyframes, time_keyframes
+from pickplace.plan import Plan, PlanConfig, Waypoint, plan_pick_place, time_keyframes
 from pickplace.scene import Scene
-from pickplace.sim import Fault, Task
+from pickplace.task import Fault, Task
 from pickplace.trajectory import PoseTrajectory
 
 # Margin kept between the brick's centre and bin 1's inner walls when drawing random poses [m]:
@@ -60,30 +66,28 @@ def check_brick_in_source_bin(
     """
     open_width = PlanConfig().open_width if open_width is None else open_width
     values = (p.x, p.y, p.yaw)
+    where = f"brick pose x={p.x:g} m, y={p.y:g} m, yaw={p.yaw:g} rad"
     if not all(math.isfinite(v) for v in values):
-        raise InvalidInputError(f"--brick values must be finite numbers, got {values}")
+        raise InvalidInputError(f"{where}: the values must be finite numbers", field="brick")
     bin_ = scene.source_bin
     X_WO = brick_on_floor(scene, p, bin_.floor_top_z)
     half = scene.brick_half_extents
-    corners = np.array([[sx * half[0], sy * half[1], 0.0] for sx in (-1, 1) for sy in (-1, 1)])
-    corners_W = corners @ X_WO.rotation().as_matrix().T + X_WO.translation()
-    if not bin_.contains_xy(corners_W):
+    if not bin_.contains_xy(transform_points(X_WO, box_corners([half[0], half[1], 0.0]))):
         c = bin_.center_W
         h = bin_.inner_half_extents
         raise InvalidInputError(
-            f"--brick {p.x:g},{p.y:g},{p.yaw:g} puts the brick outside {bin_.name}: its "
-            f"footprint must lie within the inner walls, centre x in "
-            f"[{c[0] - h[0]:.2f}, {c[0] + h[0]:.2f}] and y in [{c[1] - h[1]:.2f}, "
-            f"{c[1] + h[1]:.2f}] m minus the brick's half-size"
+            f"{where} puts the brick outside {bin_.name}: its footprint must lie within the "
+            f"inner walls, centre x in [{c[0] - h[0]:.2f}, {c[0] + h[0]:.2f}] and y in "
+            f"[{c[1] - h[1]:.2f}, {c[1] + h[1]:.2f}] m minus the brick's half-size",
+            field="brick",
         )
     reach = open_width / 2 + scene.finger_outer_offset
-    fingers = np.array([[sx * 0.01, sy * reach, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
-    fingers_W = fingers @ X_WO.rotation().as_matrix().T + X_WO.translation()
-    if not bin_.contains_xy(fingers_W):
+    if not bin_.contains_xy(transform_points(X_WO, box_corners([0.01, reach, 0.0]))):
         raise InvalidInputError(
-            f"--brick {p.x:g},{p.y:g},{p.yaw:g} is too close to {bin_.name}'s walls to grasp: "
-            f"the open fingers reach {reach * 1000:.0f} mm from the brick's centre across its "
-            f"width; move it inwards or turn it so that its long side faces the wall"
+            f"{where} is too close to {bin_.name}'s walls to grasp: the open fingers reach "
+            f"{reach * 1000:.0f} mm from the brick's centre across its width; move it inwards "
+            "or turn it so that its long side faces the wall",
+            field="brick",
         )
 
 
@@ -112,16 +116,19 @@ def pick_place_task(
         goal = BrickPlacement(float(c[0]), float(c[1]), 0.0)
     X_WO_place = brick_on_floor(scene, goal, dst.floor_top_z)
     clearance_z = max(src.wall_top_z, dst.wall_top_z) + CLEARANCE_ABOVE_WALLS
-    keyframes = make_pick_place_keyframes(
-        home_tool_pose(scene), X_WO_pick, X_WO_place, clearance_z, plan, p_W_base=scene.p_W_base
-    )
     return Task(
         scenario=name,
         seed=seed,
-        goal="place",
-        trajectory=PoseTrajectory(keyframes, plan.profile),
+        goal=PlaceGoal(X_WO_place, dst),
+        plan=plan_pick_place(
+            home_tool_pose(scene),
+            X_WO_pick,
+            X_WO_place,
+            clearance_z,
+            plan,
+            p_W_base=scene.p_W_base,
+        ),
         X_WO_start=X_WO_pick,
-        X_WO_goal=X_WO_place,
         faults=tuple(fault_list),
     )
 
@@ -170,10 +177,9 @@ def singular_reach_task(scene: Scene, name: str, seed: int, plan: PlanConfig | N
     return Task(
         scenario=name,
         seed=seed,
-        goal="reach",
-        trajectory=PoseTrajectory(keyframes, plan.profile),
+        goal=ReachGoal(),
+        plan=Plan(PoseTrajectory(keyframes, plan.profile)),
         X_WO_start=X_WO,
-        X_WO_goal=None,
     )
 
 
@@ -204,7 +210,9 @@ class Scenario:
         summary: One line shown by ``pickplace scenarios``.
         build: Builds the task from scene, name, seed and an optional brick placement.
         expected: ``"success"`` or the failure reason the scenario is designed to produce
-            (with the default controller).
+            with the default controller (``qp``).
+        expected_with: Documented outcomes with other controllers, where they differ or are
+            the point of the scenario (e.g. ``{"pinv": "limit-violated"}``).
         uses_brick: Whether ``--brick`` applies.
         random: Whether the seed changes the task.
     """
@@ -213,9 +221,13 @@ class Scenario:
     summary: str
     build: Builder
     expected: str = "success"
+    expected_with: Mapping[str, str] = field(default_factory=dict)
     uses_brick: bool = True
     random: bool = False
-    tags: tuple[str, ...] = field(default=())
+
+    def outcomes(self) -> dict[str, str]:
+        """Documented outcome per controller: ``qp`` and every one in ``expected_with``."""
+        return {"qp": self.expected, **self.expected_with}
 
 
 def _nominal(scene: Scene, name: str, seed: int, p: BrickPlacement | None) -> Task:
@@ -263,6 +275,7 @@ SCENARIOS: dict[str, Scenario] = {
             "tool pulled along a straight line past full arm stretch "
             "and back (qp stays within limits, pinv does not)",
             _reach,
+            expected_with={"pinv": "limit-violated", "dls": "limit-violated"},
             uses_brick=False,
         ),
         Scenario(

@@ -52,6 +52,11 @@ _OBJ_COUNT = {
     mujoco.mjtObj.mjOBJ_SENSOR: "nsensor",
 }
 
+# The contype bit every robot collision geom (arm and gripper) carries; world geoms (bins,
+# floor, brick) have conaffinity with it, robot geoms do not, so the robot never collides
+# with itself.
+ROBOT_CONTYPE = 2
+
 # Contact sensor fields the loop reads (bits of sensor_intprm[0]).
 _CONTACT_FOUND = 1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)
 _CONTACT_FORCE = 1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE)
@@ -275,6 +280,15 @@ class Scene:
         return model
 
     @property
+    def brick_width(self) -> float:
+        """Width of the brick across the fingers (its y extent) [m]."""
+        return 2.0 * float(self.brick_half_extents[1])
+
+    def is_robot_geom(self, geom_id: int) -> bool:
+        """True if geom ``geom_id`` belongs to the robot (carries :data:`ROBOT_CONTYPE`)."""
+        return bool(self.model.geom_contype[geom_id] & ROBOT_CONTYPE)
+
+    @property
     def arm_joint_names(self) -> tuple[str, ...]:
         """Names of the arm joints, base to flange."""
         return self.names.arm_joints
@@ -300,6 +314,12 @@ class Scene:
         """Normal force [N] of the brick on the left and right pad, shape (..., 2), from
         sensordata of shape (..., nsensordata)."""
         return self.pad_sensor_rows(sensordata)[..., 1].sum(axis=-1)
+
+    def set_brick_pose(self, data: mujoco.MjData, X_WO: SE3) -> None:
+        """Write the brick's pose ``X_WO`` into ``data.qpos`` (call mj_forward afterwards)."""
+        adr = self.brick_qpos_adr
+        data.qpos[adr : adr + 3] = X_WO.translation()
+        data.qpos[adr + 3 : adr + 7] = X_WO.rotation().wxyz
 
     def make_data(self) -> mujoco.MjData:
         """Return fresh MjData reset to the home keyframe."""

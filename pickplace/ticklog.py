@@ -5,7 +5,8 @@ simulated state copied from MuJoCo. :meth:`TickLog.derive` then fills the *deriv
 block of ticks in one vectorised pass: the Jacobian's health (seed notes 003: singular values,
 condition number, manipulability w1–w4, the translational velocity ellipsoid), the tracking
 errors, the grip force, the speed and position limits. The grasp-dependent rows (``slip``,
-``holding_torque``) are filled by the simulation's grasp checks, which know the grasp state.
+``holding_torque``) are filled by the grasp monitor (:mod:`pickplace.checks`), which knows the
+grasp state.
 """
 
 from __future__ import annotations
@@ -13,9 +14,12 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from pickplace.diagnostics import manipulability_measures
-from pickplace.kinematics import rotation_angle
+from pickplace.diagnostics import holding_torques, jacobian_health_rows
+from pickplace.geometry import quaternion_angle
 from pickplace.scene import Scene
+
+# Codes of TickLog.nonfinite: what first became non-finite at a tick.
+FINITE, CONTROLLER_NONFINITE, STATE_NONFINITE = 0, 1, 2
 
 
 class TickLog:
@@ -48,6 +52,8 @@ class TickLog:
         self.body_pos = np.zeros((n, model.nbody, 3))
         self.body_quat = np.zeros((n, model.nbody, 4))  # wxyz
         self.sensordata = np.zeros((n, model.nsensordata))
+        # What became non-finite at the tick (FINITE, CONTROLLER_NONFINITE, STATE_NONFINITE).
+        self.nonfinite = np.zeros(n, dtype=np.int8)
         # Views of the poses by part.
         self.quat_WG_plan = self.x_WG_plan[:, :4]
         self.p_WG_plan = self.x_WG_plan[:, 4:]
@@ -99,27 +105,18 @@ class TickLog:
             mujoco.mju_mat2Quat(self.quat_WG[k], self.R_WG_flat[k])
 
         # Jacobian health: singular values of J and of its translational rows.
-        J = self.J_WG[sl]
-        self.sigma[sl] = np.linalg.svd(J, compute_uv=False)
-        # Translational ellipsoid: eigen-decomposition of J_v J_vᵀ = U Σ² Uᵀ. mju_eig3 returns
-        # eigenvalues in decreasing order and U as a proper rotation (columns = axes).
-        Jv = J[:, :3]
-        JJt = Jv @ Jv.transpose(0, 2, 1)
-        eig = self.sigma_t[sl]
-        U = self.U_t[sl].reshape(-1, 9)
-        quat = self.quat_t[sl]
-        for i in range(k1 - k0):
-            mujoco.mju_eig3(eig[i], U[i], quat[i], JJt[i].reshape(9))
-        np.sqrt(np.maximum(eig, 0.0), out=eig)
-        c, *w = manipulability_measures(self.sigma[sl])
-        self.condition[sl] = c
-        self.manipulability[sl] = np.stack(w, axis=-1)
-        c, *w = manipulability_measures(eig)
-        self.condition_t[sl] = c
-        self.manipulability_t[sl] = np.stack(w, axis=-1)
+        health = jacobian_health_rows(self.J_WG[sl])
+        self.sigma[sl] = health.sigma
+        self.sigma_t[sl] = health.sigma_t
+        self.U_t[sl] = health.U_t
+        self.quat_t[sl] = health.quat_t
+        self.condition[sl] = health.condition
+        self.manipulability[sl] = health.manipulability
+        self.condition_t[sl] = health.condition_t
+        self.manipulability_t[sl] = health.manipulability_t
 
         self.position_error[sl] = np.linalg.norm(self.p_WG[sl] - self.p_WG_plan[sl], axis=1)
-        self.orientation_error[sl] = rotation_angle(self.quat_WG_plan[sl], self.quat_WG[sl])
+        self.orientation_error[sl] = quaternion_angle(self.quat_WG_plan[sl], self.quat_WG[sl])
         self.command_error[sl] = np.linalg.norm(self.p_WG_plan[sl] - self.p_WG_cmd[sl], axis=1)
         self.speed_ratio[sl] = (np.abs(self.qdot_cmd[sl]) * self._inv_v_max).max(axis=1)
         q, q_cmd = self.q[sl], self.q_cmd[sl]
@@ -134,3 +131,11 @@ class TickLog:
         )
         over = np.flatnonzero(found > sc.pad_force_slots)
         return (k0 + int(over[0]), int(found[over[0]])) if over.size else None
+
+    def set_holding(self, k0: int, k1: int, holding: np.ndarray, mass: float) -> None:
+        """Fill ``holding_torque`` for rows ``[k0, k1)``: the Jᵀ statics of a load of ``mass``
+        [kg] at the tool where ``holding`` (bool, k1 − k0) is set, zero elsewhere."""
+        self.holding_torque[k0:k1] = 0.0
+        if holding.any():
+            J = self.J_WG[k0:k1][holding]
+            self.holding_torque[k0:k1][holding] = holding_torques(J, mass)

@@ -20,23 +20,14 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 import mujoco
 import numpy as np
-import numpy.typing as npt
-from mink.lie import SE3, SO3
+from mink.lie import SE3
 
-from pickplace.errors import PlanError, UnknownNameError
-
-if TYPE_CHECKING:
-    from pickplace.plan import Keyframe
-
-FloatArray = npt.NDArray[np.float64]
-
-QUATERNION_NORM_TOL = 1e-9
-"""Largest accepted deviation of a keyframe quaternion norm from 1 [-]."""
-
+from pickplace.errors import PlanError, UnknownNameError, require_finite
+from pickplace.geometry import FloatArray, require_pose, rotation_log
 
 # --------------------------------------------------------------------------- profiles
 
@@ -149,87 +140,59 @@ def profile_by_name(name: str) -> MotionProfile:
         raise UnknownNameError("profile", str(name), PROFILES) from None
 
 
-# ---------------------------------------------------------------- rotations and checks
+# -------------------------------------------------------------------------- keyframes
 
 
-def rotation_log(R: SO3) -> FloatArray:
-    """Axis-angle vector of ``R`` along the shortest arc (angle in [0, π]) [rad].
+@dataclass(frozen=True)
+class Keyframe:
+    """A pose the tool site passes through (at rest) at a given time.
 
-    Same as mink's ``SO3.log`` (which also flips the quaternion sign when ``w < 0``) except in
-    two cases where mink returns zero: a rotation by exactly π (``w == 0``, since
-    ``sign(0) == 0``) and rotations smaller than about 2e-10 rad (its epsilon cut-off). Here
-    ``2·atan2(|v|, |w|)·v/|v|`` is used, which is accurate at every angle.
+    Attributes:
+        name: Label used in logs and recordings, e.g. ``"pick"`` (the run never reads it:
+            what the run needs from the plan are its phases, see :class:`pickplace.plan.Plan`).
+        t: Time [s].
+        X_WG: Pose of the tool site G in world (unit quaternion, copied on construction).
+        gripper_width: Commanded finger gap at this keyframe [m].
     """
-    w = float(R.wxyz[0])
-    v = np.array(R.wxyz[1:], dtype=np.float64)
-    if w < 0.0:
-        w, v = -w, -v
-    norm = float(np.linalg.norm(v))
-    if norm == 0.0:
-        return np.zeros(3, dtype=np.float64)
-    return np.asarray((2.0 * math.atan2(norm, w) / norm) * v, dtype=np.float64)
 
+    name: str
+    t: float
+    X_WG: SE3
+    gripper_width: float
 
-def rotation_angle(R_a: SO3, R_b: SO3) -> float:
-    """Angle of the relative rotation ``R_a⁻¹ R_b``, in [0, π] [rad]."""
-    return float(np.linalg.norm(rotation_log(R_a.inverse() @ R_b)))
-
-
-def slerp(R_a: SO3, R_b: SO3, alpha: float) -> SO3:
-    """Shortest-arc spherical interpolation ``R_a · exp(alpha · log(R_a⁻¹ R_b))``.
-
-    Args:
-        R_a: Rotation at ``alpha = 0``.
-        R_b: Rotation at ``alpha = 1``.
-        alpha: Interpolation fraction [-], normally in [0, 1].
-    """
-    return R_a @ SO3.exp(alpha * rotation_log(R_a.inverse() @ R_b))
-
-
-def require_pose(name: str, X: SE3) -> None:
-    """Raise PlanError unless ``X`` is an SE3 with finite values and a unit quaternion.
-
-    Args:
-        name: How to call the pose in the error message (e.g. ``"X_WO_pick"``).
-        X: Pose to check.
-    """
-    if not isinstance(X, SE3):
-        raise PlanError(f"{name} must be a mink.lie.SE3, got {type(X).__name__}")
-    if not np.all(np.isfinite(X.wxyz_xyz)):
-        raise PlanError(f"{name} must be finite, got wxyz_xyz={X.wxyz_xyz.tolist()}")
-    norm = float(np.linalg.norm(X.wxyz_xyz[:4]))
-    if abs(norm - 1.0) > QUATERNION_NORM_TOL:
-        raise PlanError(
-            f"{name} quaternion norm {norm!r} must be 1 (within {QUATERNION_NORM_TOL:g})"
+    def __post_init__(self) -> None:
+        """Validate and normalise the fields; raise PlanError naming the bad field."""
+        if not isinstance(self.name, str) or not self.name:
+            raise PlanError(f"keyframe name must be a non-empty string, got {self.name!r}")
+        label = f"keyframe '{self.name}'"
+        object.__setattr__(self, "t", require_finite(f"{label} time t [s]", self.t, PlanError))
+        require_pose(f"{label} X_WG", self.X_WG)
+        object.__setattr__(
+            self, "X_WG", SE3(wxyz_xyz=np.array(self.X_WG.wxyz_xyz, dtype=np.float64))
         )
+        width = require_finite(f"{label} gripper_width [m]", self.gripper_width, PlanError)
+        if width < 0.0:
+            raise PlanError(f"{label} gripper_width [m] must be >= 0, got {self.gripper_width!r}")
+        object.__setattr__(self, "gripper_width", width)
 
 
 def validate_keyframes(keyframes: Sequence[Keyframe]) -> None:
-    """Check that keyframes can define a trajectory.
-
-    Requires at least 2 keyframes, finite strictly increasing times, finite poses with unit
-    quaternions and finite non-negative gripper widths.
+    """Check that keyframes can define a trajectory: at least 2, times strictly increasing
+    (each :class:`Keyframe` has validated its own fields).
 
     Raises:
-        PlanError: Naming the offending keyframe and field.
+        PlanError: Naming the offending keyframe.
     """
     if len(keyframes) < 2:
         raise PlanError(f"keyframes must contain at least 2 entries, got {len(keyframes)}")
-    previous: Keyframe | None = None
-    for k in keyframes:
-        if not math.isfinite(k.t):
-            raise PlanError(f"keyframe '{k.name}' time t={k.t!r} s must be finite")
-        require_pose(f"keyframe '{k.name}' X_WG", k.X_WG)
-        if not (math.isfinite(k.gripper_width) and k.gripper_width >= 0.0):
-            raise PlanError(
-                f"keyframe '{k.name}' gripper_width={k.gripper_width!r} m must be finite and >= 0"
-            )
-        if previous is not None and not k.t > previous.t:
+    for previous, k in itertools.pairwise(keyframes):
+        if not isinstance(k, Keyframe) or not isinstance(previous, Keyframe):
+            raise PlanError(f"keyframes must be Keyframe objects, got {type(k).__name__}")
+        if not k.t > previous.t:
             raise PlanError(
                 f"keyframe '{k.name}' time t={k.t!r} s must be greater than the previous "
                 f"keyframe '{previous.name}' t={previous.t!r} s (times strictly increasing)"
             )
-        previous = k
 
 
 # ------------------------------------------------------------------------- trajectory
@@ -243,16 +206,24 @@ def _xyz(v: FloatArray) -> tuple[float, float, float]:
 
 @dataclass(frozen=True)
 class _Segment:
-    """Precomputed data of one segment (world-frame quantities)."""
+    """Precomputed data of one segment (world-frame quantities, as floats for the fast path).
+
+    Attributes:
+        t0: Start time [s].
+        inv_duration: 1 / duration [1/s].
+        q0: Orientation at the start (wxyz).
+        phi: Rotation vector of the segment in the start frame, log(R0⁻¹ R1) [rad].
+        width0: Gripper width at the start [m].
+        dwidth: Width change over the segment [m].
+        p0_xyz: Position at the start [m].
+        dp_xyz: Position change over the segment [m].
+        omega_dir_W_xyz: R0 φ: the world-frame rotation vector of the segment [rad].
+    """
 
     t0: float
     inv_duration: float
-    p0: FloatArray
-    dp: FloatArray
-    R0: SO3
     q0: FloatArray
     phi: FloatArray
-    omega_dir_W: FloatArray
     width0: float
     dwidth: float
     p0_xyz: tuple[float, float, float]
@@ -294,12 +265,8 @@ class PoseTrajectory:
                 _Segment(
                     t0=float(a.t),
                     inv_duration=1.0 / (float(b.t) - float(a.t)),
-                    p0=p0,
-                    dp=dp,
-                    R0=R0,
                     q0=np.array(R0.wxyz, dtype=np.float64),
                     phi=phi,
-                    omega_dir_W=omega_dir_W,
                     width0=float(a.gripper_width),
                     dwidth=float(b.gripper_width) - float(a.gripper_width),
                     p0_xyz=_xyz(p0),
@@ -346,66 +313,25 @@ class PoseTrajectory:
         i = bisect.bisect_right(self._times, t) - 1
         return self._keyframes[max(i, 0)]
 
-    def _locate(self, t: float) -> tuple[_Segment, float]:
-        seg = self._segments[self.segment_index(t)]
-        tau = (t - seg.t0) * seg.inv_duration
-        return seg, min(max(tau, 0.0), 1.0)
-
-    def pose(self, t: float) -> SE3:
-        """Commanded tool pose ``X_WG`` at time ``t`` [s]; exact at keyframe times."""
-        if t >= self._times[-1]:
-            return SE3(wxyz_xyz=np.array(self._keyframes[-1].X_WG.wxyz_xyz, dtype=np.float64))
-        seg, tau = self._locate(t)
-        s = self._profile.s(tau)
-        R_WG = seg.R0 @ SO3.exp(s * seg.phi)
-        return SE3.from_rotation_and_translation(R_WG, seg.p0 + s * seg.dp)
-
-    def pose_wxyz_xyz(self, t: float) -> FloatArray:
-        """:meth:`pose` as mink's parameter vector [qw, qx, qy, qz, x, y, z], computed with
-        MuJoCo's quaternion routines: the fast path of the control loop (equal to ``pose`` to
-        1e-12, up to the quaternion's sign)."""
-        out = np.empty(7, dtype=np.float64)
-        if t >= self._times[-1]:
-            out[:] = self._keyframes[-1].X_WG.wxyz_xyz
-            return out
-        seg, tau = self._locate(t)
-        s = self._profile.s(tau)
-        out[:4] = seg.q0
-        mujoco.mju_quatIntegrate(out[:4], seg.phi, s)  # R0 · exp(s φ), φ in R0's frame
-        out[4:] = seg.p0 + s * seg.dp
-        return out
-
-    def spatial_velocity(self, t: float) -> FloatArray:
-        """Spatial velocity ``V_WG = [v_W; ω_W]`` at time ``t`` [s], shape (6,).
-
-        ``v_W`` [m/s] is the velocity of G's origin and ``ω_W`` [rad/s] the angular velocity,
-        both expressed in world. Computed analytically: ``ṡ = s'(τ) / T``, ``v_W = ṡ Δp``,
-        ``ω_W = ṡ R_i φ_i``. Zero at and beyond the first and last keyframe times.
-        """
-        V_WG = np.zeros(6, dtype=np.float64)
-        if t <= self._times[0] or t >= self._times[-1]:
-            return V_WG
-        seg, tau = self._locate(t)
-        s_dot = self._profile.ds(tau) * seg.inv_duration
-        V_WG[:3] = s_dot * seg.dp
-        V_WG[3:] = s_dot * seg.omega_dir_W
-        return V_WG
-
-    def gripper_width(self, t: float) -> float:
-        """Commanded finger gap at time ``t`` [m], a linear ramp across each segment."""
-        seg, tau = self._locate(t)
-        return seg.width0 + tau * seg.dwidth
+    def next_keyframe_time(self, t: float) -> float:
+        """Time [s] of the first keyframe strictly after ``t`` (the end time past the end)."""
+        i = bisect.bisect_right(self._times, t)
+        return self._times[min(i, len(self._times) - 1)]
 
     def sample(self, t: float) -> tuple[FloatArray, FloatArray, float]:
-        """Everything the control loop needs at time ``t`` [s], with one segment lookup.
+        """The plan at time ``t`` [s]: the trajectory's one evaluator.
+
+        Position on the straight line ``p_i + s Δp``, orientation ``R_i · exp(s φ_i)`` (MuJoCo's
+        quaternion integration), spatial velocity ``ṡ [Δp; R_i φ_i]`` with ``ṡ = s'(τ) / T_i``,
+        width ``w_i + τ Δw`` (a linear ramp). Times before the first keyframe or after the last
+        clamp to the ends, where the velocity is zero.
 
         Args:
-            t: Time [s]; clamped to the trajectory like the three calls it replaces.
+            t: Time [s].
 
         Returns:
-            ``(pose_wxyz_xyz(t), spatial_velocity(t), gripper_width(t))``, equal to the three
-            calls: tool pose [qw, qx, qy, qz, x, y, z] ([-], [m]), spatial velocity
-            [v; ω] in world [m/s, rad/s] and finger gap [m]. The arrays are new.
+            ``(x_WG, V_WG, width)``: tool pose [qw, qx, qy, qz, x, y, z] ([-], [m]), spatial
+            velocity [v; ω] in world [m/s, rad/s] and finger gap [m]. The arrays are new.
         """
         times = self._times
         segments = self._segments

@@ -27,7 +27,7 @@ import mujoco
 import numpy as np
 
 from pickplace.controllers import QPController, make_controller
-from pickplace.kinematics import pose_error_W
+from pickplace.geometry import pose_error_W
 from pickplace.runner import RunRequest, prepare
 from pickplace.scene import load_scene
 from pickplace.sweep import SweepRequest, run_sweep
@@ -103,9 +103,9 @@ def controller_ticks(q: np.ndarray, x: np.ndarray, V: np.ndarray) -> dict[str, f
 def mj_step_us() -> float:
     """One physics step [µs] with the brick held between the pads (from a nominal run)."""
     _, _, sim = prepare(RunRequest())
-    grasp_tick = next(
-        round(k.t / sim.dt) for k in sim.task.trajectory.keyframes if k.name == "grip-closed"
-    )
+    phases = sim.plan.phases
+    assert phases is not None
+    grasp_tick = round(phases.grip_closed / sim.dt)
     sim.advance(grasp_tick + 50)
     return median_us(lambda: mujoco.mj_step(sim.model, sim.data), 3000)
 
@@ -182,8 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     n = sim.ticks
     picks = np.linspace(10, n - 10, 40).astype(int)
     plan = sim.task.trajectory
-    targets = np.array([plan.pose_wxyz_xyz(log.t[k] - sim.dt) for k in picks])
-    velocities = np.array([plan.spatial_velocity(log.t[k] - sim.dt) for k in picks])
+    targets = np.array([plan.sample(log.t[k] - sim.dt)[0] for k in picks])
+    velocities = np.array([plan.sample(log.t[k] - sim.dt)[1] for k in picks])
     states = log.q_cmd[picks - 1]
     report["realtime_factor_headless"] = statistics.median(headless)
     report["realtime_factor_recording"] = statistics.median(recording)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from pickplace.scenarios import SCENARIOS
 from tests.conftest import REPO, run_cli, run_cli_json
 
 BAD_INPUTS = [
@@ -82,21 +83,14 @@ def test_unreachable_brick_is_refused(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("scenario", "reasons"),
-    [
-        ("fault-gripper-disabled", {"missed-grasp"}),
-        ("fault-brick-moved", {"missed-grasp"}),
-        ("fault-heavy-brick", {"dropped", "missed-grasp"}),
-        ("fault-knock", {"dropped"}),
-        ("fault-unreachable", {"ik-failed"}),
-        ("fault-nan", {"nan"}),
-    ],
+    ("scenario", "reason"),
+    [(s.name, s.expected) for s in SCENARIOS.values() if s.expected != "success"],
 )
-def test_faults_end_in_exit_1_with_the_right_reason(scenario: str, reasons: set[str]) -> None:
+def test_faults_end_in_exit_1_with_the_right_reason(scenario: str, reason: str) -> None:
     code, s = run_cli_json("--scenario", scenario)
     assert code == 1
     assert s["success"] is False
-    assert s["failure"] in reasons
+    assert s["failure"] == reason
     assert s["failure_tick"] is not None
     failure = [e for e in s["events"] if e["kind"] == "failure"]
     assert failure and failure[0]["tick"] == s["failure_tick"]

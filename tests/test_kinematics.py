@@ -8,7 +8,7 @@ import pytest
 from mink.lie import SO3
 
 from pickplace.diagnostics import Manipulability, holding_torques, jacobian_health
-from pickplace.kinematics import ArmKinematics, pose_error_W, rotation_angle, rotation_vector_W
+from pickplace.kinematics import ArmKinematics
 
 
 def _random_q(scene, rng: np.random.Generator) -> np.ndarray:
@@ -116,42 +116,6 @@ def test_logged_ellipsoid_axes_diagonalise_the_translational_velocity_ellipsoid(
         np.testing.assert_allclose(U @ np.diag(log.sigma_t[k] ** 2) @ U.T, Jv @ Jv.T, atol=1e-9)
 
 
-def test_pose_error_is_position_difference_and_world_rotation_vector() -> None:
-    rng = np.random.default_rng(4)
-    for _ in range(200):
-        quats = rng.normal(size=(2, 4))
-        quats /= np.linalg.norm(quats, axis=1, keepdims=True)
-        if rng.random() < 0.3:  # nearly equal orientations, either quaternion sign
-            quats[1] = (quats[0] + rng.normal(0.0, 1e-7, 4)) * rng.choice([-1.0, 1.0])
-            quats[1] /= np.linalg.norm(quats[1])
-        x = np.concatenate([quats[0], rng.normal(size=3)])
-        x_target = np.concatenate([quats[1], rng.normal(size=3)])
-        error = pose_error_W(x, x_target)
-        np.testing.assert_array_equal(error[:3], x_target[4:] - x[4:])
-        R, R_target = SO3(wxyz=quats[0]), SO3(wxyz=quats[1])
-        expected = (R_target @ R.inverse()).log()
-        np.testing.assert_allclose(error[3:], expected, atol=1e-12)
-        np.testing.assert_array_equal(rotation_vector_W(quats[0], quats[1]), error[3:])
-        # Same as MuJoCo's quaternion routines (the previous implementation).
-        conj, q_err, w = np.empty(4), np.empty(4), np.empty(3)
-        mujoco.mju_negQuat(conj, quats[0])
-        mujoco.mju_mulQuat(q_err, quats[1], conj)
-        mujoco.mju_quat2Vel(w, q_err if q_err[0] >= 0.0 else -q_err, 1.0)
-        np.testing.assert_allclose(error[3:], w, atol=1e-14)
-
-
-def test_rotation_vector_at_identity_and_half_turn() -> None:
-    q = np.array([0.5, 0.5, -0.5, 0.5])
-    assert not np.any(rotation_vector_W(q, q))
-    assert not np.any(rotation_vector_W(q, -q))  # −q is the same rotation
-    half_turn = np.array([0.0, 0.0, 0.6, 0.8])
-    np.testing.assert_allclose(
-        rotation_vector_W(np.array([1.0, 0.0, 0.0, 0.0]), half_turn),
-        np.pi * np.array([0.0, 0.6, 0.8]),
-        atol=1e-15,
-    )
-
-
 def test_pose_and_jacobian_are_new_arrays(scene) -> None:
     kin = ArmKinematics(scene)
     kin.update(scene.q_home)
@@ -161,19 +125,3 @@ def test_pose_and_jacobian_are_new_arrays(scene) -> None:
     assert not np.shares_memory(J, J2) and not np.shares_memory(x, x2)
     assert not np.allclose(J, J2) and not np.allclose(x, x2)
     assert kin.wxyz_xyz_list() == x2.tolist()
-
-
-def test_rotation_angle_is_the_norm_of_the_rotation_vector_for_stacks_too() -> None:
-    rng = np.random.default_rng(5)
-    a = rng.normal(size=(200, 4))
-    b = rng.normal(size=(200, 4))
-    a /= np.linalg.norm(a, axis=1, keepdims=True)
-    b /= np.linalg.norm(b, axis=1, keepdims=True)
-    expected = [np.linalg.norm(rotation_vector_W(x, y)) for x, y in zip(a, b, strict=True)]
-    np.testing.assert_allclose(rotation_angle(a, b), expected, atol=1e-12)
-    # q and −q are one rotation; tiny angles keep their precision; a half turn is π.
-    assert rotation_angle(a[0], -a[0]) == pytest.approx(0.0, abs=1e-15)
-    tiny = SO3.exp(np.array([1e-9, 0.0, 0.0])).wxyz
-    assert rotation_angle(np.array([1.0, 0, 0, 0]), tiny) == pytest.approx(1e-9, rel=1e-6)
-    half = np.array([0.0, 0.0, 1.0, 0.0])
-    assert rotation_angle(np.array([1.0, 0, 0, 0]), half) == pytest.approx(np.pi)

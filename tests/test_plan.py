@@ -10,16 +10,17 @@ import pytest
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError, UnknownNameError
+from pickplace.geometry import rotation_angle
 from pickplace.grasp import brick_pose, choose_grasp, top_down_rotation
 from pickplace.plan import (
-    Keyframe,
+    Phases,
     PlanConfig,
     Waypoint,
-    make_pick_place_keyframes,
+    plan_pick_place,
     segment_duration,
     time_keyframes,
 )
-from pickplace.trajectory import rotation_angle
+from pickplace.trajectory import Keyframe
 
 NAMES = [
     "initial",
@@ -43,15 +44,15 @@ X_WO_PLACE = brick_pose(0.55, 0.30, 0.045, -1.5)
 
 
 def plan(config: PlanConfig | None = None, **kwargs: float) -> dict[str, Keyframe]:
-    keyframes = make_pick_place_keyframes(
-        X_WG_INITIAL, X_WO_PICK, X_WO_PLACE, 0.35, config or PlanConfig(), **kwargs
-    )
-    return {k.name: k for k in keyframes}
+    p = plan_pick_place(X_WG_INITIAL, X_WO_PICK, X_WO_PLACE, 0.35, config or PlanConfig(), **kwargs)
+    return {k.name: k for k in p.trajectory.keyframes}
 
 
 def test_keyframe_names_times_and_widths() -> None:
     config = PlanConfig()
-    keyframes = make_pick_place_keyframes(X_WG_INITIAL, X_WO_PICK, X_WO_PLACE, 0.35, config)
+    keyframes = plan_pick_place(
+        X_WG_INITIAL, X_WO_PICK, X_WO_PLACE, 0.35, config
+    ).trajectory.keyframes
     assert [k.name for k in keyframes] == NAMES
     times = [k.t for k in keyframes]
     assert times[0] == 0.0
@@ -109,9 +110,9 @@ def test_keyframe_geometry() -> None:
 @pytest.mark.parametrize("brick_yaw", np.linspace(-math.pi, math.pi, 25))
 def test_pick_keyframe_is_the_chosen_grasp(brick_yaw: float) -> None:
     X_WO_pick = brick_pose(0.5, -0.3, 0.045, float(brick_yaw))
-    keyframes = make_pick_place_keyframes(
+    keyframes = plan_pick_place(
         X_WG_INITIAL, X_WO_pick, X_WO_PLACE, 0.35, grasp_height=0.01
-    )
+    ).trajectory.keyframes
     X_WG_pick = next(k.X_WG for k in keyframes if k.name == "pick")
     X_OG = choose_grasp(X_WO_pick, X_WG_INITIAL, grasp_height=0.01)
     X_OG_planned = X_WO_pick.inverse() @ X_WG_pick
@@ -191,13 +192,36 @@ def test_invalid_plan_inputs_are_rejected() -> None:
     with pytest.raises(UnknownNameError, match="unknown profile 'cubic'"):
         PlanConfig(profile="cubic")
     with pytest.raises(PlanError, match=r"clearance_z \[m\] must be a finite number"):
-        make_pick_place_keyframes(X_WG_INITIAL, X_WO_PICK, X_WO_PLACE, math.nan)
+        plan_pick_place(X_WG_INITIAL, X_WO_PICK, X_WO_PLACE, math.nan)
     bad = SE3(np.array([1.0, 0.2, 0.0, 0.0, 0.5, 0.0, 0.05]))
     with pytest.raises(PlanError, match="X_WO_place quaternion norm"):
-        make_pick_place_keyframes(X_WG_INITIAL, X_WO_PICK, bad, 0.35)
+        plan_pick_place(X_WG_INITIAL, X_WO_PICK, bad, 0.35)
     with pytest.raises(PlanError, match="waypoints must contain at least 2"):
         time_keyframes([Waypoint("a", SE3.identity(), 0.0)])
     with pytest.raises(PlanError, match=r"waypoint 'a' min_duration \[s\] must be >= 0"):
         Waypoint("a", SE3.identity(), 0.0, min_duration=-1.0)
     with pytest.raises(PlanError, match=r"keyframe 'b' gripper_width \[m\] must be >= 0"):
         time_keyframes([Waypoint("a", SE3.identity(), 0.0), Waypoint("b", SE3.identity(), -1.0)])
+
+
+def test_phases_are_the_plan_s_own_keyframe_times() -> None:
+    """The run reads phases, not names: they must be the times of the keyframes they stand
+    for, in order (descent, grip, carry, place, release)."""
+    p = plan_pick_place(X_WG_INITIAL, X_WO_PICK, X_WO_PLACE, 0.35, PlanConfig())
+    k = {kf.name: kf.t for kf in p.trajectory.keyframes}
+    assert p.phases == Phases(
+        approach=(k["pre-pick"], k["pick"]),
+        grip_closed=k["grip-closed"],
+        transport=(k["lift"], k["pre-place"]),
+        place_reached=k["place"],
+        release=k["release"],
+    )
+    assert p.X_OG is not None
+    X_WG_pick = SE3(p.trajectory.sample(p.phases.approach[1])[0])
+    np.testing.assert_allclose((X_WO_PICK @ p.X_OG).wxyz_xyz, X_WG_pick.wxyz_xyz, atol=1e-12)
+    assert p.trajectory.next_keyframe_time(p.phases.transport[0]) == k["clearance"]
+
+
+def test_phases_out_of_order_are_rejected() -> None:
+    with pytest.raises(PlanError, match=r"phase grip_closed .* must not precede approach end"):
+        Phases(approach=(1.0, 2.0), grip_closed=1.5, transport=(3, 4), place_reached=5, release=6)

@@ -20,6 +20,7 @@ from pickplace.recording import Recorder
 from pickplace.scenarios import get_scenario
 from pickplace.scene import Scene, load_scene
 from pickplace.sim import RunResult, Simulation
+from pickplace.verdict import FailureReason
 
 RECORDING_ID = "pick-place/qp/seed-0"
 
@@ -290,7 +291,7 @@ def test_summary_document(recording: Recording) -> None:
 def test_interrupted_run_is_complete_and_readable(tmp_path: Path) -> None:
     path = tmp_path / "interrupted.rrd"
     result, _ = run_recorded(path, stop_at=150)
-    assert result.failure == "interrupted"
+    assert result.failure is FailureReason.INTERRUPTED
     assert result.ticks == 150
     ents = read_entities(path)  # the footer is there: store() works
     assert ents[body_path("link7")].n_rows("Transform3D:translation") == 150

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from pickplace.runner import RunRequest, prepare
-from pickplace.sim import FAILURE_REASONS, WALL_TIME_FIELDS, Simulation
+from pickplace.scenarios import SCENARIOS
+from pickplace.sim import Simulation
+from pickplace.verdict import FAILURE_REASONS, WALL_TIME_FIELDS
 
 # Slip budget in the gripper frame during transport (issue 4): 3 mm.
 MAX_SLIP = 0.003
@@ -111,19 +113,23 @@ def test_singular_reach_pinv_exceeds_a_speed_limit() -> None:
 
 
 @pytest.mark.parametrize(
-    "scenario",
-    [
-        "pick-place",
-        "pick-place-random",
-        "singular-reach",
-        "fault-gripper-disabled",
-        "fault-brick-moved",
-        "fault-heavy-brick",
-        "fault-knock",
-        "fault-unreachable",
-        "fault-nan",
-    ],
+    ("scenario", "controller", "expected"),
+    [(s.name, c, e) for s in SCENARIOS.values() for c, e in s.outcomes().items()],
 )
+def test_every_scenario_has_its_documented_outcome(
+    scenario: str, controller: str, expected: str
+) -> None:
+    """Each scenario's row in the registry (and the README) says what it ends in."""
+    sim, s = _run(scenario, controller, seed=3)
+    outcome = "success" if s["success"] else s["failure"]
+    assert outcome == expected, s["events"][-3:]
+    if expected == "success" and s["goal"] == "place":
+        assert brick_in_target_bin(sim)
+    if expected != "success":
+        assert s["failure_tick"] is not None
+
+
+@pytest.mark.parametrize("scenario", list(SCENARIOS))
 def test_same_inputs_give_the_same_result_bit_for_bit(scenario: str) -> None:
     _, a = _run(scenario, seed=7)
     _, b = _run(scenario, seed=7)

@@ -13,7 +13,8 @@ import pytest
 from pickplace.errors import InvalidInputError
 from pickplace.runner import RunRequest, prepare
 from pickplace.scene import SCENES_DIR
-from pickplace.sim import WALL_TIME_FIELDS, Simulation
+from pickplace.sim import Simulation
+from pickplace.verdict import WALL_TIME_FIELDS
 
 
 def _summary(sim: Simulation) -> dict[str, Any]:
@@ -62,8 +63,9 @@ def _contact_forces(sim: Simulation) -> np.ndarray:
 
 
 def _grasp_tick(sim: Simulation) -> int:
-    t = next(k.t for k in sim.task.trajectory.keyframes if k.name == "grip-closed")
-    return round(t / sim.dt)
+    phases = sim.plan.phases
+    assert phases is not None
+    return round(phases.grip_closed / sim.dt)
 
 
 def test_pad_sensors_equal_the_contact_forces_and_the_log_keeps_them() -> None:

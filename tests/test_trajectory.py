@@ -11,19 +11,34 @@ from mink.lie import SE3, SO3
 from scipy.spatial.transform import Rotation, Slerp
 
 from pickplace.errors import PlanError, UnknownNameError
+from pickplace.geometry import rotation_log, slerp
 from pickplace.grasp import brick_pose, top_down_rotation
-from pickplace.plan import Keyframe, PlanConfig, make_pick_place_keyframes
+from pickplace.plan import PlanConfig, plan_pick_place
 from pickplace.trajectory import (
     PROFILES,
+    Keyframe,
     LinearProfile,
     MinimumJerkProfile,
     MotionProfile,
     PoseTrajectory,
     SineProfile,
     profile_by_name,
-    rotation_log,
-    slerp,
 )
+
+
+def pose_at(traj: PoseTrajectory, t: float) -> SE3:
+    """The trajectory's pose at ``t`` as an SE3 (from its one evaluator, ``sample``)."""
+    return SE3(wxyz_xyz=traj.sample(t)[0])
+
+
+def velocity_at(traj: PoseTrajectory, t: float) -> np.ndarray:
+    """The trajectory's spatial velocity [v; ω] at ``t``."""
+    return traj.sample(t)[1]
+
+
+def width_at(traj: PoseTrajectory, t: float) -> float:
+    """The trajectory's gripper width at ``t``."""
+    return traj.sample(t)[2]
 
 
 def quat_angle(q_a: np.ndarray, q_b: np.ndarray) -> float:
@@ -38,13 +53,14 @@ def pose(R: SO3, p: tuple[float, float, float]) -> SE3:
 
 def pick_place_keyframes(config: PlanConfig) -> list[Keyframe]:
     X_WG_initial = pose(top_down_rotation(0.4) @ SO3.from_y_radians(0.3), (0.35, 0.05, 0.55))
-    return make_pick_place_keyframes(
+    plan = plan_pick_place(
         X_WG_initial,
         brick_pose(0.55, -0.30, 0.045, 2.5),
         brick_pose(0.55, 0.30, 0.045, -0.7),
         clearance_z=0.35,
         config=config,
     )
+    return list(plan.trajectory.keyframes)
 
 
 def random_keyframes(rng: np.random.Generator, n: int) -> list[Keyframe]:
@@ -74,7 +90,7 @@ TRAJECTORIES = trajectories()
 @pytest.mark.parametrize("traj", TRAJECTORIES)
 def test_pose_at_keyframe_times_equals_keyframe(traj: PoseTrajectory) -> None:
     for k in traj.keyframes:
-        X = traj.pose(k.t)
+        X = pose_at(traj, k.t)
         assert np.max(np.abs(X.translation() - k.X_WG.translation())) <= 1e-12
         assert quat_angle(X.rotation().wxyz, k.X_WG.rotation().wxyz) <= 1e-12
 
@@ -82,7 +98,7 @@ def test_pose_at_keyframe_times_equals_keyframe(traj: PoseTrajectory) -> None:
 @pytest.mark.parametrize("traj", TRAJECTORIES)
 def test_orientation_is_unit_quaternion_everywhere(traj: PoseTrajectory) -> None:
     for t in np.linspace(-0.5, traj.end_time + 0.5, 2001):
-        assert abs(np.linalg.norm(traj.pose(float(t)).rotation().wxyz) - 1.0) <= 1e-12
+        assert abs(np.linalg.norm(pose_at(traj, float(t)).rotation().wxyz) - 1.0) <= 1e-12
 
 
 def _sign_flip_endpoints() -> list[tuple[SO3, SO3]]:
@@ -108,7 +124,7 @@ def test_slerp_never_takes_the_long_way_round(R_a: SO3, R_b: SO3, profile: str) 
         ],
         profile,
     )
-    quats = [traj.pose(float(t)).rotation().wxyz for t in np.linspace(0.0, 2.0, 501)]
+    quats = [pose_at(traj, float(t)).rotation().wxyz for t in np.linspace(0.0, 2.0, 501)]
     steps = [quat_angle(q0, q1) for q0, q1 in itertools.pairwise(quats)]
     assert max(steps) <= total
     # The path length equals the shortest angle: no detour.
@@ -131,7 +147,7 @@ def test_half_turn_with_zero_w_is_interpolated() -> None:
         ],
         "linear",
     )
-    omega = traj.spatial_velocity(0.3)[3:]
+    omega = velocity_at(traj, 0.3)[3:]
     assert np.linalg.norm(omega) == pytest.approx(math.pi, abs=1e-12)
 
 
@@ -149,19 +165,19 @@ def test_spatial_velocity_matches_central_finite_difference(traj: PoseTrajectory
     assert len(times) >= 990
     errors = []
     for t in times:
-        X_plus, X_minus = traj.pose(t + h), traj.pose(t - h)
+        X_plus, X_minus = pose_at(traj, t + h), pose_at(traj, t - h)
         v_fd = (X_plus.translation() - X_minus.translation()) / (2 * h)
         w_fd = _world_rotation_log(X_plus.rotation(), X_minus.rotation()) / (2 * h)
-        errors.append(traj.spatial_velocity(float(t)) - np.concatenate([v_fd, w_fd]))
+        errors.append(velocity_at(traj, float(t)) - np.concatenate([v_fd, w_fd]))
     assert np.max(np.abs(errors)) <= 1e-6
 
 
 @pytest.mark.parametrize("traj", [t for t in TRAJECTORIES if t.profile.name != "linear"])
 def test_spatial_velocity_is_zero_at_keyframes_and_outside(traj: PoseTrajectory) -> None:
     for k in traj.keyframes:
-        assert np.max(np.abs(traj.spatial_velocity(k.t))) <= 1e-12
-    assert not np.any(traj.spatial_velocity(traj.start_time - 1.0))
-    assert not np.any(traj.spatial_velocity(traj.end_time + 1.0))
+        assert np.max(np.abs(velocity_at(traj, k.t))) <= 1e-12
+    assert not np.any(velocity_at(traj, traj.start_time - 1.0))
+    assert not np.any(velocity_at(traj, traj.end_time + 1.0))
 
 
 @pytest.mark.parametrize("profile", ["sine", "minimum-jerk", "linear"])
@@ -173,7 +189,7 @@ def test_planned_velocity_respects_speed_limits(profile: str) -> None:
     times += [0.5 * (a + b) for a, b in itertools.pairwise(knots)]  # sine peaks
     v_max = w_max = 0.0
     for t in times:
-        V = traj.spatial_velocity(float(t))
+        V = velocity_at(traj, float(t))
         v_max = max(v_max, float(np.linalg.norm(V[:3])))
         w_max = max(w_max, float(np.linalg.norm(V[3:])))
     assert v_max <= config.max_linear_speed * (1 + 1e-9)
@@ -191,7 +207,7 @@ def test_pure_rotation_with_linear_profile_has_constant_angular_velocity() -> No
         ],
         "linear",
     )
-    omegas = np.array([traj.spatial_velocity(float(t))[3:] for t in np.linspace(0.01, 1.49, 200)])
+    omegas = np.array([velocity_at(traj, float(t))[3:] for t in np.linspace(0.01, 1.49, 200)])
     norms = np.linalg.norm(omegas, axis=1)
     assert np.max(np.abs(norms - norms[0])) <= 1e-12
     assert np.max(np.abs(omegas / norms[:, None] - omegas[0] / norms[0])) <= 1e-12
@@ -199,7 +215,7 @@ def test_pure_rotation_with_linear_profile_has_constant_angular_velocity() -> No
     # The constant-rate claim also holds for the finite difference of the poses.
     h = 1e-4
     for t in (0.2, 0.7, 1.3):
-        w_fd = _world_rotation_log(traj.pose(t + h).rotation(), traj.pose(t - h).rotation())
+        w_fd = _world_rotation_log(pose_at(traj, t + h).rotation(), pose_at(traj, t - h).rotation())
         np.testing.assert_allclose(w_fd / (2 * h), omegas[0], rtol=0, atol=1e-9)
 
 
@@ -231,7 +247,7 @@ def test_orientation_matches_scipy_slerp_for_linear_profile() -> None:
     expected = reference(samples).as_quat()
     for t, q_xyzw in zip(samples, expected, strict=True):
         q_wxyz = np.roll(q_xyzw, 1)
-        assert quat_angle(traj.pose(float(t)).rotation().wxyz, q_wxyz) <= 1e-9
+        assert quat_angle(pose_at(traj, float(t)).rotation().wxyz, q_wxyz) <= 1e-9
 
 
 def test_gripper_width_ramps_linearly_across_segments() -> None:
@@ -239,11 +255,11 @@ def test_gripper_width_ramps_linearly_across_segments() -> None:
     traj = PoseTrajectory(
         [Keyframe("a", 0.0, X, 0.10), Keyframe("b", 1.0, X, 0.10), Keyframe("c", 3.0, X, 0.0)]
     )
-    assert traj.gripper_width(0.5) == 0.10
-    assert traj.gripper_width(2.0) == pytest.approx(0.05, abs=1e-15)
-    assert traj.gripper_width(3.0) == 0.0
-    assert traj.gripper_width(-1.0) == 0.10
-    assert traj.gripper_width(10.0) == 0.0
+    assert width_at(traj, 0.5) == 0.10
+    assert width_at(traj, 2.0) == pytest.approx(0.05, abs=1e-15)
+    assert width_at(traj, 3.0) == 0.0
+    assert width_at(traj, -1.0) == 0.10
+    assert width_at(traj, 10.0) == 0.0
 
 
 def test_segment_index_active_keyframe_and_clamping() -> None:
@@ -256,8 +272,8 @@ def test_segment_index_active_keyframe_and_clamping() -> None:
     assert [traj.segment_index(t) for t in (-1.0, 0.0, 0.99, 1.0, 2.5, 9.0)] == [0, 0, 0, 1, 1, 1]
     names = [traj.active_keyframe(t).name for t in (-1.0, 0.0, 0.99, 1.0, 2.49, 2.5, 9.0)]
     assert names == ["a", "a", "a", "b", "b", "c", "c"]
-    assert traj.pose(-3.0) == X_a
-    assert traj.pose(7.0) == X_a
+    assert pose_at(traj, -3.0) == X_a
+    assert pose_at(traj, 7.0) == X_a
     assert traj.sample_path(7).shape == (7, 3)
 
 
@@ -313,45 +329,42 @@ def test_invalid_keyframes_are_rejected() -> None:
         Keyframe("x", 0.0, SE3(np.array([1.0, 0, 0, 0, math.inf, 0, 0])), 0.0)
 
 
-def test_fast_pose_path_equals_pose_up_to_quaternion_sign() -> None:
-    from mink.lie import SE3, SO3
-
-    from pickplace.grasp import brick_pose
-    from pickplace.plan import make_pick_place_keyframes
-    from pickplace.trajectory import PoseTrajectory
-
+def test_sample_is_the_straight_line_and_slerp_of_the_lecture() -> None:
+    """sample (MuJoCo quaternion integration, float math) equals p_i + s Δp and
+    R_i · exp(s φ_i) computed independently with mink, and ṡ [Δp; R_i φ_i] for the velocity."""
     X0 = SE3.from_rotation_and_translation(
         SO3.from_rpy_radians(np.pi, 0.1, 2.0), np.array([0.4, -0.4, 0.3])
     )
-    keyframes = make_pick_place_keyframes(
+    plan = plan_pick_place(
         X0,
         brick_pose(0.05, -0.55, 0.035, 2.5),
         brick_pose(0.55, 0.0, 0.035, -0.3),
         0.26,
         p_W_base=np.zeros(3),
     )
-    traj = PoseTrajectory(keyframes)
+    traj = plan.trajectory
+    keyframes, profile = traj.keyframes, traj.profile
     for t in np.linspace(-1.0, traj.end_time + 1.0, 997):
-        a = traj.pose(float(t)).wxyz_xyz
-        b = traj.pose_wxyz_xyz(float(t))
-        sign = 1.0 if a[:4] @ b[:4] >= 0 else -1.0
-        np.testing.assert_allclose(b[:4] * sign, a[:4], atol=1e-12)
-        np.testing.assert_allclose(b[4:], a[4:], atol=1e-12)
-
-
-@pytest.mark.parametrize("traj", TRAJECTORIES)
-def test_sample_equals_the_three_separate_calls(traj: PoseTrajectory) -> None:
-    """One lookup, same answers: bit for bit, at knots, between them, before and after."""
-    knots = [k.t for k in traj.keyframes]
-    times = list(np.linspace(traj.start_time - 1.0, traj.end_time + 1.0, 1501))
-    times += knots + [math.nextafter(t, -math.inf) for t in knots]
-    times += [math.nextafter(t, math.inf) for t in knots]
-    for t in map(float, times):
-        x_WG, V_WG, width = traj.sample(t)
-        np.testing.assert_array_equal(x_WG, traj.pose_wxyz_xyz(t))
-        np.testing.assert_array_equal(V_WG, traj.spatial_velocity(t))
-        assert width == traj.gripper_width(t)
-        assert x_WG.shape == (7,) and V_WG.shape == (6,) and isinstance(width, float)
+        t = float(t)
+        i = min(max(traj.segment_index(t), 0), len(keyframes) - 2)
+        a, b = keyframes[i], keyframes[i + 1]
+        T = b.t - a.t
+        tau = min(max((t - a.t) / T, 0.0), 1.0)
+        s_ = profile.s(tau)
+        phi = rotation_log(a.X_WG.rotation().inverse() @ b.X_WG.rotation())
+        R = a.X_WG.rotation() @ SO3.exp(s_ * phi)
+        p = a.X_WG.translation() + s_ * (b.X_WG.translation() - a.X_WG.translation())
+        x, V, _ = traj.sample(t)
+        sign = 1.0 if R.wxyz @ x[:4] >= 0 else -1.0
+        np.testing.assert_allclose(x[:4] * sign, R.wxyz, atol=1e-12)
+        np.testing.assert_allclose(x[4:], p, atol=1e-12)
+        if traj.start_time < t < traj.end_time:
+            s_dot = profile.ds(tau) / T
+            dp = b.X_WG.translation() - a.X_WG.translation()
+            np.testing.assert_allclose(V[:3], s_dot * dp, atol=1e-12)
+            np.testing.assert_allclose(V[3:], s_dot * a.X_WG.rotation().apply(phi), atol=1e-12)
+        else:
+            assert not np.any(V)
 
 
 def test_sample_returns_new_arrays() -> None:

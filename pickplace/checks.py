@@ -1,0 +1,271 @@
+"""Checks: objects that judge a block of ticks of the log and report the first failure.
+
+Every check has one interface, :meth:`Check.first_failure`: given the tick log and a block of
+ticks ``[k0, k1)`` whose rows are complete (raw and derived), return the first failure in it
+(reason, tick, text) or None. A goal (:mod:`pickplace.goals`) owns a list of checks; the order
+of the list is the precedence of failures that happen at the same tick. The loop calls each
+check once per block, in tick order, and keeps the run's first failure.
+
+A check may keep state from block to block (the grasp monitor does), may emit events, and may
+fill the log's grasp-dependent rows; it never acts on the simulation.
+
+To add a check: subclass :class:`Check` here (or in a module of your own), give it a test that
+makes it fail and one that does not, and add it to the goal's list in :mod:`pickplace.goals`.
+"""
+
+from __future__ import annotations
+
+import enum
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from pickplace.controllers import IK_STATUSES, IKStatus
+from pickplace.events import Emit
+from pickplace.plan import Plan
+from pickplace.scene import Scene
+from pickplace.ticklog import CONTROLLER_NONFINITE, FINITE, TickLog
+from pickplace.verdict import Failure, FailureReason, SuccessCriteria
+
+_NO_SOLUTION = IK_STATUSES.index(IKStatus.NO_SOLUTION.value)
+
+
+@dataclass(frozen=True)
+class CheckContext:
+    """What checks may read besides the log: the scene, the plan, the criteria, the clock,
+    and where to report events.
+
+    Attributes:
+        scene: The scene being simulated (ids, limits, brick and gripper geometry).
+        plan: The plan being executed (its phases say when to judge what).
+        criteria: Thresholds of the verdict.
+        dt: Control period [s].
+        emit: Records an event (``emit(kind, text, level, tick)``).
+    """
+
+    scene: Scene
+    plan: Plan
+    criteria: SuccessCriteria
+    dt: float
+    emit: Emit
+
+
+def first_tick(mask: np.ndarray, k0: int) -> int | None:
+    """Index ``k0 + i`` of the first true entry of ``mask``, or None."""
+    idx = np.flatnonzero(mask)
+    return k0 + int(idx[0]) if idx.size else None
+
+
+class Check(ABC):
+    """Judges blocks of ticks; see the module docstring."""
+
+    @abstractmethod
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        """The first failure among ticks ``[k0, k1)`` of ``log``, or None."""
+
+
+class NonFiniteCheck(Check):
+    """The controller's joint velocities or the simulated state became NaN or infinite."""
+
+    def __init__(self, ctx: CheckContext) -> None:
+        self.dt = ctx.dt
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        k = first_tick(log.nonfinite[k0:k1] != FINITE, k0)
+        if k is None:
+            return None
+        what = (
+            "controller returned non-finite joint velocities"
+            if log.nonfinite[k] == CONTROLLER_NONFINITE
+            else "simulation state became non-finite"
+        )
+        return Failure(k, FailureReason.NAN, f"{what} at t={k * self.dt:.3f} s")
+
+
+class QPSolutionCheck(Check):
+    """The IK found no solution (the commanded joints then stand still)."""
+
+    def __init__(self, ctx: CheckContext) -> None:
+        self.dt = ctx.dt
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        k = first_tick(log.ik_status[k0:k1] == _NO_SOLUTION, k0)
+        if k is None:
+            return None
+        return Failure(
+            k, FailureReason.IK_FAILED, f"the QP found no solution at t={k * self.dt:.3f} s"
+        )
+
+
+class TrackingCheck(Check):
+    """The commanded tool fell more than ``criteria.tracking_limit`` behind the plan."""
+
+    def __init__(self, ctx: CheckContext) -> None:
+        self.dt = ctx.dt
+        self.limit = ctx.criteria.tracking_limit
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        k = first_tick(log.command_error[k0:k1] > self.limit, k0)
+        if k is None:
+            return None
+        status = IK_STATUSES[int(log.ik_status[k])]
+        text = (
+            f"commanded tool is {log.command_error[k] * 1000:.1f} mm from the plan at "
+            f"t={k * self.dt:.3f} s (limit {self.limit * 1000:.0f} mm; status {status})"
+        )
+        return Failure(k, FailureReason.IK_FAILED, text)
+
+
+class SpeedLimitCheck(Check):
+    """A commanded joint speed exceeded its limit (beyond the QP's solver tolerance)."""
+
+    def __init__(self, ctx: CheckContext) -> None:
+        self.dt = ctx.dt
+        self.v_max = ctx.scene.v_max
+        self.names = ctx.scene.arm_joint_names
+        self.threshold = 1.0 + ctx.criteria.speed_ratio_tolerance
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        k = first_tick(log.speed_ratio[k0:k1] > self.threshold, k0)
+        if k is None:
+            return None
+        qdot = log.qdot_cmd[k]
+        j = int(np.argmax(np.abs(qdot) / self.v_max))
+        text = (
+            f"{self.names[j]} commanded at {abs(qdot[j]):.2f} rad/s, limit {self.v_max[j]:.2f} "
+            f"rad/s ({log.speed_ratio[k]:.4f}x) at t={k * self.dt:.3f} s"
+        )
+        return Failure(k, FailureReason.LIMIT_VIOLATED, text)
+
+
+class PositionLimitCheck(Check):
+    """A joint (measured or commanded) went past its range by more than the tolerance."""
+
+    def __init__(self, ctx: CheckContext) -> None:
+        self.dt = ctx.dt
+        self.tolerance = ctx.criteria.position_limit_tolerance
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        k = first_tick(log.limit_violation[k0:k1] > self.tolerance, k0)
+        if k is None:
+            return None
+        text = (
+            f"a joint is {log.limit_violation[k]:.4f} rad past its limit at t={k * self.dt:.3f} s"
+        )
+        return Failure(k, FailureReason.LIMIT_VIOLATED, text)
+
+
+class GraspState(enum.Enum):
+    """Where the brick is with respect to the gripper."""
+
+    OPEN = "open"  # not grasped yet
+    HOLDING = "holding"  # gripped since the grip closed
+    RELEASED = "released"  # let go (placed, dropped or never grasped)
+
+
+class GraspMonitor(Check):
+    """The grasp state machine over the plan's phases: missed grasps and drops.
+
+    OPEN → HOLDING when the grip closes (``phases.grip_closed``) with both pads pressing firmly
+    on a brick of the right width (else missed-grasp); HOLDING → RELEASED at
+    ``phases.release``, or dropped if, before ``phases.place_reached``, the brick slips
+    ``drop_slip`` in the gripper frame or loses all pad contact for ``drop_contact_loss``.
+    While holding it fills the log's ``slip`` (up to the place) and ``holding_torque``.
+
+    Raises:
+        ValueError: The plan has no phases (it carries nothing to monitor).
+    """
+
+    def __init__(self, ctx: CheckContext) -> None:
+        if ctx.plan.phases is None:
+            raise ValueError("the grasp monitor needs a plan with phases (grasp, place, release)")
+        self.ctx = ctx
+        self.phases = ctx.plan.phases
+        self.state = GraspState.OPEN
+        self.p_GO_grasp: np.ndarray | None = None
+        self.contact_lost_since: float | None = None
+        self.brick_width = ctx.scene.brick_width
+        self.firm_force = ctx.criteria.grasp_force_fraction * ctx.scene.gripper_force_limit
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        holding = np.zeros(k1 - k0, dtype=bool)
+        failure = self._run(log, k0, k1, holding)
+        log.set_holding(k0, k1, holding, self.ctx.scene.brick_mass)
+        return failure
+
+    def _run(self, log: TickLog, k0: int, k1: int, holding: np.ndarray) -> Failure | None:
+        cr, emit = self.ctx.criteria, self.ctx.emit
+        t_grasp, t_place = self.phases.grip_closed, self.phases.place_reached
+        t_release = self.phases.release
+        sl = slice(k0, k1)
+        # Brick centre in the tool frame, p_GO = R_WGᵀ (p_WO − p_WG), for every tick.
+        p_WO = log.body_pos[sl, self.ctx.scene.brick_body_id]
+        p_GO_all = np.einsum("nji,nj->ni", log.R_WG[sl], p_WO - log.p_WG[sl])
+        forces = log.pad_force[sl]
+        touching: np.ndarray = np.any(forces > 0.0, axis=1)
+        times: list[float] = log.t[sl].tolist()
+        failure: Failure | None = None
+        slip: list[float] = []
+        if self.state is GraspState.HOLDING and self.p_GO_grasp is not None:
+            slip = np.linalg.norm(p_GO_all - self.p_GO_grasp, axis=1).tolist()
+        for i, t in enumerate(times):
+            k = k0 + i
+            if self.state is GraspState.RELEASED:
+                break
+            if self.state is GraspState.OPEN:
+                if t < t_grasp - 1e-9:
+                    continue
+                gap = float(log.gripper_gap[k])
+                f = forces[i]
+                emit(
+                    "grasp",
+                    f"grip closed: gap {gap * 1000:.1f} mm, pad forces {f[0]:.1f} / {f[1]:.1f} N",
+                    tick=k,
+                )
+                if (
+                    gap < cr.grasp_gap_fraction * self.brick_width
+                    or not (f > self.firm_force).all()
+                ):
+                    text = (
+                        f"after closing the finger gap is {gap * 1000:.1f} mm (brick "
+                        f"{self.brick_width * 1000:.0f} mm) and pad forces are {f[0]:.1f} / "
+                        f"{f[1]:.1f} N (need > {self.firm_force:.0f} N each)"
+                    )
+                    failure = Failure(k, FailureReason.MISSED_GRASP, text)
+                    self.state = GraspState.RELEASED
+                    break
+                self.state = GraspState.HOLDING
+                self.p_GO_grasp = p_GO_all[i].copy()
+                slip = np.linalg.norm(p_GO_all - self.p_GO_grasp, axis=1).tolist()
+                continue
+            # HOLDING
+            holding[i] = True
+            s = slip[i]
+            if t <= t_place + 1e-9:
+                log.slip[k] = s
+            if touching[i]:
+                self.contact_lost_since = None
+            elif self.contact_lost_since is None:
+                self.contact_lost_since = t
+            lost = (
+                self.contact_lost_since is not None
+                and t - self.contact_lost_since >= cr.drop_contact_loss - 1e-9
+            )
+            if t < t_place - 1e-9 and (s > cr.drop_slip or lost):
+                why = (
+                    f"it moved {s * 1000:.0f} mm in the gripper frame"
+                    if s > cr.drop_slip
+                    else f"no pad contact for {cr.drop_contact_loss:.2f} s"
+                )
+                emit("drop", f"brick left the gripper at t={t:.3f} s: {why}", level="error", tick=k)
+                if failure is None:
+                    failure = Failure(
+                        k, FailureReason.DROPPED, f"brick left the gripper at t={t:.3f} s ({why})"
+                    )
+                self.state = GraspState.RELEASED
+            elif t >= t_release - 1e-9:
+                self.state = GraspState.RELEASED
+                gap = float(log.gripper_gap[k])
+                emit("release", f"gripper opened: gap {gap * 1000:.1f} mm", tick=k)
+        return failure

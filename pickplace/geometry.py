@@ -1,0 +1,198 @@
+"""Spatial algebra shared by every layer: rotations, pose errors, pose checks and boxes.
+
+Each quantity is written once here, in the forms the callers need side by side: on mink's
+``SO3``/``SE3`` objects (the plan), on wxyz quaternion stacks (vectorised over the ticks of a
+run) and in plain Python floats (the control tick, where six-element NumPy calls cost more in
+call overhead than in arithmetic).
+
+Conventions: quaternions are wxyz (mink and MuJoCo); poses as vectors are mink's
+``wxyz_xyz`` = [qw, qx, qy, qz, x, y, z]; rotation vectors are axis · angle [rad] on the short
+way round (angle in [0, π]); spatial velocities and pose errors are [linear; angular].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+from mink.lie import SE3, SO3
+
+from pickplace.errors import PlanError
+
+FloatArray = npt.NDArray[np.float64]
+
+QUATERNION_NORM_TOL = 1e-9
+"""Largest accepted deviation of a pose's quaternion norm from 1 [-]."""
+
+
+# ------------------------------------------------------------------------------ angles
+
+
+def wrap_angle(angle: float) -> float:
+    """Wrap an angle to [-π, π] [rad]."""
+    return math.remainder(angle, 2.0 * math.pi)
+
+
+# ----------------------------------------------------------------------- rotation log
+
+
+def rotation_log(R: SO3) -> FloatArray:
+    """Axis-angle vector of ``R`` along the shortest arc (angle in [0, π]) [rad].
+
+    Same as mink's ``SO3.log`` (which also flips the quaternion sign when ``w < 0``) except in
+    two cases where mink returns zero: a rotation by exactly π (``w == 0``, since
+    ``sign(0) == 0``) and rotations smaller than about 2e-10 rad (its epsilon cut-off). Here
+    ``2·atan2(|v|, |w|)·v/|v|`` is used, which is accurate at every angle.
+    """
+    w = float(R.wxyz[0])
+    v = np.array(R.wxyz[1:], dtype=np.float64)
+    if w < 0.0:
+        w, v = -w, -v
+    norm = float(np.linalg.norm(v))
+    if norm == 0.0:
+        return np.zeros(3, dtype=np.float64)
+    return np.asarray((2.0 * math.atan2(norm, w) / norm) * v, dtype=np.float64)
+
+
+def rotation_vector_floats(
+    qw: float, qx: float, qy: float, qz: float, tw: float, tx: float, ty: float, tz: float
+) -> tuple[float, float, float]:
+    """World-frame rotation vector [rad] taking quaternion q onto t (both wxyz, unit).
+
+    The plain-float form of :func:`rotation_vector_W`: log(t ⊗ q⁻¹) on the short way round,
+    i.e. with e = t ⊗ q⁻¹ = (w, v) and w ≥ 0, the vector 2·atan2(‖v‖, w)·v/‖v‖ (zero when v is).
+    """
+    w = tw * qw + tx * qx + ty * qy + tz * qz
+    x = tx * qw - tw * qx - ty * qz + tz * qy
+    y = ty * qw - tw * qy - tz * qx + tx * qz
+    z = tz * qw - tw * qz - tx * qy + ty * qx
+    if w < 0.0:  # q and -q are the same rotation: take the short way round
+        w, x, y, z = -w, -x, -y, -z
+    norm = math.sqrt(x * x + y * y + z * z)
+    if norm == 0.0:
+        return 0.0, 0.0, 0.0
+    scale = 2.0 * math.atan2(norm, w) / norm
+    return scale * x, scale * y, scale * z
+
+
+def rotation_vector_W(quat_from: np.ndarray, quat_to: np.ndarray) -> FloatArray:
+    """World-frame rotation vector [rad] of the shortest rotation taking ``quat_from`` to
+    ``quat_to`` (both wxyz): log(R_to R_fromᵀ), shape (3,)."""
+    qw, qx, qy, qz = quat_from.tolist()
+    tw, tx, ty, tz = quat_to.tolist()
+    return np.array(rotation_vector_floats(qw, qx, qy, qz, tw, tx, ty, tz))
+
+
+# ---------------------------------------------------------------------- rotation angle
+
+
+def rotation_angle(R_a: SO3, R_b: SO3) -> float:
+    """Angle of the relative rotation ``R_a⁻¹ R_b``, in [0, π] [rad]."""
+    return float(np.linalg.norm(rotation_log(R_a.inverse() @ R_b)))
+
+
+def quaternion_angle(quat_a: npt.ArrayLike, quat_b: npt.ArrayLike) -> FloatArray:
+    """Angle [rad] of the rotation between orientations ``quat_a`` and ``quat_b`` (wxyz).
+
+    The vectorised form of :func:`rotation_angle`, equal to ‖rotation_vector_W(quat_a, quat_b)‖,
+    for single quaternions (4,) or stacks (..., 4): with q = q_b ⊗ q_a⁻¹ = (w, v), the angle is
+    2·atan2(‖v‖, |w|) (q and −q are the same rotation), accurate near 0 as well as near π.
+    """
+    a = np.asarray(quat_a, dtype=float)
+    b = np.asarray(quat_b, dtype=float)
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    w = aw * bw + ax * bx + ay * by + az * bz
+    # Vector part of q_b ⊗ q_a⁻¹: a_w b_v − b_w a_v + a_v × b_v.
+    vx = aw * bx - bw * ax + ay * bz - az * by
+    vy = aw * by - bw * ay + az * bx - ax * bz
+    vz = aw * bz - bw * az + ax * by - ay * bx
+    return np.asarray(2.0 * np.arctan2(np.sqrt(vx * vx + vy * vy + vz * vz), np.abs(w)))
+
+
+# ---------------------------------------------------------------------------- slerp
+
+
+def slerp(R_a: SO3, R_b: SO3, alpha: float) -> SO3:
+    """Shortest-arc spherical interpolation ``R_a · exp(alpha · log(R_a⁻¹ R_b))``.
+
+    Args:
+        R_a: Rotation at ``alpha = 0``.
+        R_b: Rotation at ``alpha = 1``.
+        alpha: Interpolation fraction [-], normally in [0, 1].
+    """
+    return R_a @ SO3.exp(alpha * rotation_log(R_a.inverse() @ R_b))
+
+
+# ------------------------------------------------------------------------ pose error
+
+
+def pose_error_W_floats(
+    x_WG: Sequence[float], x_WG_target: Sequence[float]
+) -> tuple[float, float, float, float, float, float]:
+    """:func:`pose_error_W` in plain Python floats.
+
+    Args:
+        x_WG: Current pose [qw, qx, qy, qz, x, y, z] ([-], [m]).
+        x_WG_target: Target pose, same layout.
+
+    Returns:
+        Position error [m] (3 floats), then the world-frame rotation vector [rad] (3 floats).
+    """
+    qw, qx, qy, qz, px, py, pz = x_WG
+    tw, tx, ty, tz, p_tx, p_ty, p_tz = x_WG_target
+    wx, wy, wz = rotation_vector_floats(qw, qx, qy, qz, tw, tx, ty, tz)
+    return p_tx - px, p_ty - py, p_tz - pz, wx, wy, wz
+
+
+def pose_error_W(x_WG: np.ndarray, x_WG_target: np.ndarray) -> FloatArray:
+    """Error (6,) between two poses given as wxyz_xyz vectors (see :meth:`SE3.wxyz_xyz`).
+
+    Returns [p_target − p; log(R_target Rᵀ)]: the position error [m] and the world-frame
+    rotation vector [rad] that takes R_WG onto R_WG_target; a new array.
+    """
+    return np.array(pose_error_W_floats(x_WG.tolist(), x_WG_target.tolist()))
+
+
+# ------------------------------------------------------------------------ pose checks
+
+
+def require_pose(name: str, X: SE3) -> None:
+    """Raise PlanError unless ``X`` is an SE3 with finite values and a unit quaternion.
+
+    Args:
+        name: How to call the pose in the error message (e.g. ``"X_WO_pick"``).
+        X: Pose to check.
+    """
+    if not isinstance(X, SE3):
+        raise PlanError(f"{name} must be a mink.lie.SE3, got {type(X).__name__}")
+    if not np.all(np.isfinite(X.wxyz_xyz)):
+        raise PlanError(f"{name} must be finite, got wxyz_xyz={X.wxyz_xyz.tolist()}")
+    norm = float(np.linalg.norm(X.wxyz_xyz[:4]))
+    if abs(norm - 1.0) > QUATERNION_NORM_TOL:
+        raise PlanError(
+            f"{name} quaternion norm {norm!r} must be 1 (within {QUATERNION_NORM_TOL:g})"
+        )
+
+
+# ------------------------------------------------------------------------------ boxes
+
+
+def box_corners(half_extents: npt.ArrayLike) -> FloatArray:
+    """The 8 corners (8, 3) of a box centred at its frame's origin [m].
+
+    Args:
+        half_extents: Half sizes along the frame's x, y, z [m]; a zero half size gives the
+            corners of a rectangle (each corner twice), e.g. a footprint.
+    """
+    half = np.asarray(half_extents, dtype=np.float64)
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    return np.asarray(signs * half, dtype=np.float64)
+
+
+def transform_points(X_WB: SE3, p_B: npt.ArrayLike) -> FloatArray:
+    """Points ``p_B`` (N, 3) given in frame B, expressed in world: R_WB p_B + p_WB [m]."""
+    R_WB = X_WB.rotation().as_matrix()
+    return np.asarray(np.asarray(p_B) @ R_WB.T + X_WB.translation(), dtype=np.float64)
