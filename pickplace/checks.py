@@ -9,8 +9,10 @@ check once per block, in tick order, and keeps the run's first failure.
 A check may keep state from block to block (the grasp monitor does), may emit events, and may
 fill the log's grasp-dependent rows; it never acts on the simulation.
 
-To add a check: subclass :class:`Check` here (or in a module of your own), give it a test that
-makes it fail and one that does not, and add it to the goal's list in :mod:`pickplace.goals`.
+To add a check: subclass :class:`Check` in this module, with its reason in
+:class:`FailureReason` if it is a new one, add it to :data:`PLACE_CHECKS` (or
+:data:`REACH_CHECKS`) at the precedence it should have, give it a test that makes it fail and
+one that does not, and add the reason to the README's failure list.
 """
 
 from __future__ import annotations
@@ -26,9 +28,80 @@ from pickplace.events import Emit
 from pickplace.plan import Plan
 from pickplace.scene import Scene
 from pickplace.ticklog import CONTROLLER_NONFINITE, FINITE, TickLog
-from pickplace.verdict import Failure, FailureReason, SuccessCriteria
 
 _NO_SOLUTION = IK_STATUSES.index(IKStatus.NO_SOLUTION.value)
+
+
+class FailureReason(enum.Enum):
+    """Why a run failed; the values are the strings of the JSON summary."""
+
+    MISSED_GRASP = "missed-grasp"
+    DROPPED = "dropped"
+    IK_FAILED = "ik-failed"
+    LIMIT_VIOLATED = "limit-violated"
+    NOT_IN_TARGET_BIN = "not-in-target-bin"
+    NAN = "nan"
+    INTERRUPTED = "interrupted"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+FAILURE_REASONS: tuple[str, ...] = tuple(r.value for r in FailureReason)
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A failure found by a check: its reason, the tick it happened at and a text."""
+
+    tick: int
+    reason: FailureReason
+    text: str
+
+
+@dataclass(frozen=True)
+class SuccessCriteria:
+    """Geometry that decides grasp, drop and placement verdicts.
+
+    Attributes:
+        grasp_force_fraction: A pad touches the brick "firmly" above this fraction of the
+            gripper's force limit (0.25 · 40 N = 10 N; a held brick sees the full 40 N).
+        grasp_gap_fraction: After closing, the finger gap must be at least this fraction of the
+            brick's width across the fingers (0.5 · 0.05 m); an empty gripper closes to 0.
+        drop_slip: Brick displacement in the gripper frame since the grasp [m] that counts as
+            dropped: 0.02 m exceeds the pads' 0.015 m half-height, so the brick is no longer
+            between the pads where it was gripped.
+        drop_contact_loss: Seconds without any pad-brick contact that count as dropped [s].
+        rest_speed: Brick linear speed below which it is at rest [m/s].
+        rest_angular_speed: Brick angular speed below which it is at rest [rad/s].
+        floor_tolerance: Largest gap between the brick's lowest corner and the bin floor's top
+            face for the brick to be resting on it [m] (contacts penetrate < 1 mm).
+        max_tilt: Largest angle between the brick's z axis and world z for lying flat [rad].
+        settle_time: Longest time simulated after the plan ends for the brick to come to
+            rest [s].
+        failure_grace: Time still simulated after a failure, so that its consequence can be
+            seen in the recording [s].
+        tracking_limit: Planned-vs-commanded tool position error beyond which the IK has lost
+            the plan (ik-failed) [m]: larger than any lag of a tracking IK (< 1 mm).
+        speed_ratio_tolerance: Joint-speed ratios are compared with 1 + this: the QP's bounds
+            are exact up to solver tolerance [-].
+        position_limit_tolerance: How far past a joint limit a joint may be before the run
+            counts as a limit violation [rad].
+    """
+
+    grasp_force_fraction: float = 0.25
+    grasp_gap_fraction: float = 0.5
+    drop_slip: float = 0.02
+    drop_contact_loss: float = 0.1
+    rest_speed: float = 0.005
+    rest_angular_speed: float = 0.05
+    floor_tolerance: float = 0.003
+    max_tilt: float = np.deg2rad(5.0)
+    settle_time: float = 1.5
+    failure_grace: float = 0.5
+    tracking_limit: float = 0.02
+    speed_ratio_tolerance: float = 1e-6
+    position_limit_tolerance: float = 1e-3
 
 
 @dataclass(frozen=True)
@@ -58,7 +131,15 @@ def first_tick(mask: np.ndarray, k0: int) -> int | None:
 
 
 class Check(ABC):
-    """Judges blocks of ticks; see the module docstring."""
+    """Judges blocks of ticks; see the module docstring.
+
+    Args:
+        ctx: What the check may read besides the log.
+    """
+
+    @abstractmethod
+    def __init__(self, ctx: CheckContext) -> None:
+        """Take what the check needs from ``ctx``."""
 
     @abstractmethod
     def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
@@ -269,3 +350,20 @@ class GraspMonitor(Check):
                 gap = float(log.gripper_gap[k])
                 emit("release", f"gripper opened: gap {gap * 1000:.1f} mm", tick=k)
         return failure
+
+
+# The checks of each goal, in order of precedence within a tick (see pickplace.goals).
+PLACE_CHECKS: tuple[type[Check], ...] = (
+    NonFiniteCheck,
+    QPSolutionCheck,
+    TrackingCheck,
+    SpeedLimitCheck,
+    PositionLimitCheck,
+    GraspMonitor,
+)
+REACH_CHECKS: tuple[type[Check], ...] = (
+    NonFiniteCheck,
+    QPSolutionCheck,
+    SpeedLimitCheck,
+    PositionLimitCheck,
+)

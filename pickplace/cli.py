@@ -15,9 +15,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from pickplace.checks import FailureReason
 from pickplace.errors import PickPlaceError
 from pickplace.scenarios import SCENARIOS, BrickPlacement
-from pickplace.verdict import FailureReason
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 

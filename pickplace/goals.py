@@ -17,24 +17,16 @@ from typing import ClassVar
 import mujoco
 from mink.lie import SE3
 
+from pickplace import checks as _checks
 from pickplace.checks import (
     Check,
     CheckContext,
-    GraspMonitor,
-    NonFiniteCheck,
-    PositionLimitCheck,
-    QPSolutionCheck,
-    SpeedLimitCheck,
-    TrackingCheck,
-)
-from pickplace.scene import BinGeometry, Scene
-from pickplace.verdict import (
     Failure,
     FailureReason,
     SuccessCriteria,
-    brick_at_rest,
-    placement_problems,
 )
+from pickplace.scene import BinGeometry, Scene
+from pickplace.verdict import brick_at_rest, placement_problems
 
 
 class Goal(ABC):
@@ -82,15 +74,9 @@ class PlaceGoal(Goal):
         return self._X_WO_goal
 
     def checks(self, ctx: CheckContext) -> list[Check]:
-        """Non-finite state, no QP solution, tracking, speed and position limits, grasp."""
-        return [
-            NonFiniteCheck(ctx),
-            QPSolutionCheck(ctx),
-            TrackingCheck(ctx),
-            SpeedLimitCheck(ctx),
-            PositionLimitCheck(ctx),
-            GraspMonitor(ctx),
-        ]
+        """:data:`~pickplace.checks.PLACE_CHECKS`: non-finite state, no QP solution, tracking,
+        speed and position limits, the grasp monitor."""
+        return [check(ctx) for check in _checks.PLACE_CHECKS]
 
     def final_failure(
         self, scene: Scene, data: mujoco.MjData, criteria: SuccessCriteria, tick: int
@@ -108,10 +94,6 @@ class ReachGoal(Goal):
     name = "reach"
 
     def checks(self, ctx: CheckContext) -> list[Check]:
-        """Non-finite state, no QP solution, speed and position limits."""
-        return [
-            NonFiniteCheck(ctx),
-            QPSolutionCheck(ctx),
-            SpeedLimitCheck(ctx),
-            PositionLimitCheck(ctx),
-        ]
+        """:data:`~pickplace.checks.REACH_CHECKS`: non-finite state, no QP solution, speed and
+        position limits."""
+        return [check(ctx) for check in _checks.REACH_CHECKS]

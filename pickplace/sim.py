@@ -35,7 +35,7 @@ from typing import Protocol
 import mujoco
 import numpy as np
 
-from pickplace.checks import Check, CheckContext
+from pickplace.checks import Check, CheckContext, FailureReason, SuccessCriteria
 from pickplace.controllers import IK_STATUSES, DiffIKController, IKStatus
 from pickplace.errors import ControllerError, InvalidInputError, require_positive
 from pickplace.events import Event
@@ -43,13 +43,7 @@ from pickplace.plan import Plan
 from pickplace.scene import Scene
 from pickplace.task import Task
 from pickplace.ticklog import CONTROLLER_NONFINITE, FINITE, STATE_NONFINITE, TickLog
-from pickplace.verdict import (
-    FailureReason,
-    RunResult,
-    SuccessCriteria,
-    brick_pose,
-    run_metrics,
-)
+from pickplace.verdict import RunResult, brick_pose, run_metrics
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,12 @@
 """The verdict of a run: failure reasons, the geometry that decides them, metrics, the summary.
 
-Everything here is judged from stated geometry (:class:`SuccessCriteria`, the scene's bins and
-brick) and from the tick log, never assumed. The checks that run during a run are in
-:mod:`pickplace.checks`; the goals that choose them in :mod:`pickplace.goals`.
+Everything here is judged from stated geometry (:class:`~pickplace.checks.SuccessCriteria`, the
+scene's bins and brick) and from the tick log, never assumed. The checks that run during a run,
+and the failure reasons, are in :mod:`pickplace.checks`; the goals in :mod:`pickplace.goals`.
 """
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 from typing import Any
 
@@ -15,84 +14,12 @@ import mujoco
 import numpy as np
 from mink.lie import SE3, SO3
 
+from pickplace.checks import FailureReason, SuccessCriteria
 from pickplace.controllers import IK_STATUSES
 from pickplace.events import Event
 from pickplace.geometry import box_corners, transform_points
 from pickplace.scene import BinGeometry, Scene
 from pickplace.ticklog import TickLog
-
-
-class FailureReason(enum.Enum):
-    """Why a run failed; the values are the strings of the JSON summary."""
-
-    MISSED_GRASP = "missed-grasp"
-    DROPPED = "dropped"
-    IK_FAILED = "ik-failed"
-    LIMIT_VIOLATED = "limit-violated"
-    NOT_IN_TARGET_BIN = "not-in-target-bin"
-    NAN = "nan"
-    INTERRUPTED = "interrupted"
-
-    def __str__(self) -> str:
-        return self.value
-
-
-FAILURE_REASONS: tuple[str, ...] = tuple(r.value for r in FailureReason)
-
-
-@dataclass(frozen=True)
-class Failure:
-    """A failure found by a check: its reason, the tick it happened at and a text."""
-
-    tick: int
-    reason: FailureReason
-    text: str
-
-
-@dataclass(frozen=True)
-class SuccessCriteria:
-    """Geometry that decides grasp, drop and placement verdicts.
-
-    Attributes:
-        grasp_force_fraction: A pad touches the brick "firmly" above this fraction of the
-            gripper's force limit (0.25 · 40 N = 10 N; a held brick sees the full 40 N).
-        grasp_gap_fraction: After closing, the finger gap must be at least this fraction of the
-            brick's width across the fingers (0.5 · 0.05 m); an empty gripper closes to 0.
-        drop_slip: Brick displacement in the gripper frame since the grasp [m] that counts as
-            dropped: 0.02 m exceeds the pads' 0.015 m half-height, so the brick is no longer
-            between the pads where it was gripped.
-        drop_contact_loss: Seconds without any pad-brick contact that count as dropped [s].
-        rest_speed: Brick linear speed below which it is at rest [m/s].
-        rest_angular_speed: Brick angular speed below which it is at rest [rad/s].
-        floor_tolerance: Largest gap between the brick's lowest corner and the bin floor's top
-            face for the brick to be resting on it [m] (contacts penetrate < 1 mm).
-        max_tilt: Largest angle between the brick's z axis and world z for lying flat [rad].
-        settle_time: Longest time simulated after the plan ends for the brick to come to
-            rest [s].
-        failure_grace: Time still simulated after a failure, so that its consequence can be
-            seen in the recording [s].
-        tracking_limit: Planned-vs-commanded tool position error beyond which the IK has lost
-            the plan (ik-failed) [m]: larger than any lag of a tracking IK (< 1 mm).
-        speed_ratio_tolerance: Joint-speed ratios are compared with 1 + this: the QP's bounds
-            are exact up to solver tolerance [-].
-        position_limit_tolerance: How far past a joint limit a joint may be before the run
-            counts as a limit violation [rad].
-    """
-
-    grasp_force_fraction: float = 0.25
-    grasp_gap_fraction: float = 0.5
-    drop_slip: float = 0.02
-    drop_contact_loss: float = 0.1
-    rest_speed: float = 0.005
-    rest_angular_speed: float = 0.05
-    floor_tolerance: float = 0.003
-    max_tilt: float = np.deg2rad(5.0)
-    settle_time: float = 1.5
-    failure_grace: float = 0.5
-    tracking_limit: float = 0.02
-    speed_ratio_tolerance: float = 1e-6
-    position_limit_tolerance: float = 1e-3
-
 
 # ------------------------------------------------------------------------ the brick
 

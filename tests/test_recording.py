@@ -14,13 +14,13 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
+from pickplace.checks import FailureReason
 from pickplace.controllers import make_controller
 from pickplace.errors import InvalidInputError, RecordingError
 from pickplace.recording import Recorder
 from pickplace.scenarios import get_scenario
 from pickplace.scene import Scene, load_scene
 from pickplace.sim import RunResult, Simulation
-from pickplace.verdict import FailureReason
 
 RECORDING_ID = "pick-place/qp/seed-0"
 

@@ -8,10 +8,11 @@ import mujoco
 import numpy as np
 import pytest
 
+from pickplace.checks import FAILURE_REASONS
 from pickplace.runner import RunRequest, prepare
 from pickplace.scenarios import SCENARIOS
 from pickplace.sim import Simulation
-from pickplace.verdict import FAILURE_REASONS, WALL_TIME_FIELDS
+from pickplace.verdict import WALL_TIME_FIELDS
 
 # Slip budget in the gripper frame during transport (issue 4): 3 mm.
 MAX_SLIP = 0.003

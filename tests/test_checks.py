@@ -1,0 +1,156 @@
+"""Checks judge blocks of the tick log: each one on rows made to fail it, their precedence, and
+a new check added without touching the loop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pickplace import checks
+from pickplace.checks import (
+    PLACE_CHECKS,
+    REACH_CHECKS,
+    Check,
+    CheckContext,
+    Failure,
+    FailureReason,
+    NonFiniteCheck,
+    PositionLimitCheck,
+    QPSolutionCheck,
+    SpeedLimitCheck,
+    SuccessCriteria,
+    TrackingCheck,
+)
+from pickplace.controllers import IK_STATUSES
+from pickplace.runner import RunRequest, prepare
+from pickplace.scene import Scene
+from pickplace.ticklog import CONTROLLER_NONFINITE, STATE_NONFINITE, TickLog
+
+DT = 0.01
+
+
+def _context(scene: Scene) -> CheckContext:
+    _, task, _ = prepare(RunRequest())
+    return CheckContext(scene, task.plan, SuccessCriteria(), DT, lambda *a, **k: None)
+
+
+def _log(scene: Scene, n: int = 20) -> TickLog:
+    log = TickLog(scene, n, DT)
+    log.q_cmd[:] = scene.q_home
+    log.qpos[:] = scene.make_data().qpos
+    log.derive(0, n)
+    return log
+
+
+def test_quiet_rows_pass_every_check(scene: Scene) -> None:
+    ctx, log = _context(scene), _log(scene)
+    for cls in (NonFiniteCheck, QPSolutionCheck, TrackingCheck, SpeedLimitCheck):
+        assert cls(ctx).first_failure(log, 0, 20) is None
+    assert PositionLimitCheck(ctx).first_failure(log, 0, 20) is None
+
+
+@pytest.mark.parametrize("code", [CONTROLLER_NONFINITE, STATE_NONFINITE])
+def test_non_finite_is_reported_at_its_first_tick(scene: Scene, code: int) -> None:
+    ctx, log = _context(scene), _log(scene)
+    log.nonfinite[[7, 12]] = code
+    f = NonFiniteCheck(ctx).first_failure(log, 0, 20)
+    assert f is not None and (f.tick, f.reason) == (7, FailureReason.NAN)
+    assert ("controller" if code == CONTROLLER_NONFINITE else "state") in f.text
+    assert NonFiniteCheck(ctx).first_failure(log, 13, 20) is None  # only its block
+
+
+def test_no_qp_solution_and_lost_tracking_are_ik_failures(scene: Scene) -> None:
+    ctx, log = _context(scene), _log(scene)
+    log.ik_status[9] = IK_STATUSES.index("no-solution")
+    f = QPSolutionCheck(ctx).first_failure(log, 0, 20)
+    assert f == Failure(9, FailureReason.IK_FAILED, "the QP found no solution at t=0.090 s")
+    limit = ctx.criteria.tracking_limit
+    log.command_error[4] = limit  # at the limit is still tracking
+    log.command_error[5] = limit * 1.01
+    f = TrackingCheck(ctx).first_failure(log, 0, 20)
+    assert f is not None and f.tick == 5 and f.reason is FailureReason.IK_FAILED
+
+
+def test_speed_and_position_limits_name_the_joint_and_the_excess(scene: Scene) -> None:
+    ctx, log = _context(scene), _log(scene)
+    j = 3
+    log.qdot_cmd[6, j] = 1.5 * scene.v_max[j]
+    log.derive(0, 20)
+    f = SpeedLimitCheck(ctx).first_failure(log, 0, 20)
+    assert f is not None and (f.tick, f.reason) == (6, FailureReason.LIMIT_VIOLATED)
+    assert scene.arm_joint_names[j] in f.text and "1.5000x" in f.text
+    tol = ctx.criteria.position_limit_tolerance
+    log.q_cmd[11, 0] = scene.q_max[0] + 2 * tol
+    log.derive(0, 20)
+    f = PositionLimitCheck(ctx).first_failure(log, 0, 20)
+    assert f is not None and f.tick == 11 and f"{2 * tol:.4f} rad past" in f.text
+
+
+def test_the_goals_list_the_limit_checks_in_their_precedence() -> None:
+    assert PLACE_CHECKS[:2] == REACH_CHECKS[:2] == (NonFiniteCheck, QPSolutionCheck)
+    assert checks.GraspMonitor in PLACE_CHECKS and checks.GraspMonitor not in REACH_CHECKS
+    assert TrackingCheck in PLACE_CHECKS and TrackingCheck not in REACH_CHECKS
+
+
+class _FailsAt(Check):
+    """A check of a test's own: fails at a fixed tick with a given reason."""
+
+    tick = 40
+    reason = FailureReason.LIMIT_VIOLATED
+
+    def __init__(self, ctx: CheckContext) -> None:
+        self.ctx = ctx
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        if k0 <= self.tick < k1:
+            return Failure(self.tick, self.reason, "a test's own check")
+        return None
+
+
+class _AlsoFailsAt(_FailsAt):
+    reason = FailureReason.DROPPED
+
+
+def test_a_new_check_needs_only_its_place_in_the_list(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The loop is not edited: a check appended to the goal's list fails the run at its tick,
+    and of two failures at one tick the one listed first wins."""
+    monkeypatch.setattr(checks, "PLACE_CHECKS", (*PLACE_CHECKS, _FailsAt, _AlsoFailsAt))
+    _, _, sim = prepare(RunRequest())
+    s = sim.run().summary()
+    assert (s["failure"], s["failure_tick"]) == ("limit-violated", 40)
+    failures = [e for e in s["events"] if e["kind"] == "failure"]
+    assert failures == [
+        {
+            "tick": 40,
+            "t": pytest.approx(0.4),
+            "level": "error",
+            "kind": "failure",
+            "text": "limit-violated: a test's own check",
+        }
+    ]
+    # The run went on for the failure's grace period, then stopped.
+    assert s["ticks"] == 40 + round(SuccessCriteria().failure_grace / sim.dt)
+
+
+def test_an_earlier_failure_of_a_later_check_wins(monkeypatch: pytest.MonkeyPatch) -> None:
+    class Earlier(_AlsoFailsAt):
+        tick = 20
+
+    monkeypatch.setattr(checks, "PLACE_CHECKS", (*PLACE_CHECKS, _FailsAt, Earlier))
+    _, _, sim = prepare(RunRequest())
+    s = sim.run().summary()
+    assert (s["failure"], s["failure_tick"]) == ("dropped", 20)
+
+
+def test_failure_reasons_are_the_documented_strings() -> None:
+    assert [r.value for r in FailureReason] == [
+        "missed-grasp",
+        "dropped",
+        "ik-failed",
+        "limit-violated",
+        "not-in-target-bin",
+        "nan",
+        "interrupted",
+    ]
+    assert str(FailureReason.NAN) == "nan"
+    assert np.all([isinstance(r.value, str) for r in FailureReason])
