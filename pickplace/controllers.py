@@ -257,11 +257,15 @@ class QPController(DiffIKController):
 
     Two backends give the same answer (tested to 1e-8):
 
-    - ``"fast"`` (default): the frame task's error and Jacobian come from mink every tick and
-      are weighted with the task's cost and gain; the posture task's are read from the task
-      (on hinge/slide-only models its error is simply q − q_target, otherwise mink computes
-      it); the joint-position and joint-speed limits are merged into simple bounds; the QP
-      is assembled in preallocated buffers and daqp is called directly.
+    - ``"fast"`` (default): the frame task's error and Jacobian come from mink's public
+      ``compute_error``/``compute_jacobian`` every tick and are weighted with the task's cost
+      and gain; the posture task's are read from the task (on hinge/slide-only models its
+      error is simply q − q_target, otherwise mink's ``compute_qp_residual`` gives it); the
+      joint-position and joint-speed limits are merged into simple bounds; the QP is
+      assembled in preallocated buffers and daqp is called directly. Measured (median µs
+      a solve on nominal-run states, one process): this 37; with compute_qp_residual 46;
+      with mink's limit rows instead of the merged bounds 88; through qpsolvers instead of
+      the direct daqp call 69; mink.solve_ik 159.
     - ``"mink"``: ``mink.solve_ik(..., solver="daqp")`` on the same tasks and limits.
 
     The frame task's target is an SE3 owned by the controller and rewritten in place every
@@ -468,9 +472,9 @@ class QPController(DiffIKController):
         Minimise ½ Δqᵀ H Δq + cᵀ Δq subject to the bounds on Δq, where, as mink builds them
         from each task's cost-weighted Jacobian W, error e, gain α and Levenberg-Marquardt
         term μ: H = Σ WᵀW + (damping + Σ μ) I and c = Σ Wᵀ(α cost ⊙ e). The frame task's e
-        and Jacobian come from mink every tick; the posture task's target is read from the
-        task every tick and, on hinge/slide-only models, its e is q − q_target and its
-        Jacobian the identity.
+        and Jacobian come from mink's public ``compute_error`` and ``compute_jacobian`` every
+        tick; the posture task's target is read from the task every tick and, on
+        hinge/slide-only models, its e is q − q_target and its Jacobian the identity.
 
         Args:
             q: Joint positions [rad]; forward kinematics must already be loaded at q.
@@ -480,7 +484,11 @@ class QPController(DiffIKController):
         """
         self._refresh_task_weights()
         frame, posture = self.frame_task, self.posture_task
-        e, W = frame._error_and_jacobian(self.configuration)  # both new arrays
+        # Two public calls (each looks the frame pose up again): measured about 2 µs a solve
+        # dearer than mink's private joint call and 9 µs cheaper than compute_qp_residual, which
+        # weights every tick even at unit cost.
+        e = frame.compute_error(self.configuration)  # a new array
+        W = frame.compute_jacobian(self.configuration)  # a new array
         if not self._frame_unit_cost:
             W *= self._frame_cost_col
         if not self._frame_unit_gain_cost:

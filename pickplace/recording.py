@@ -34,40 +34,27 @@ Entity path                                        Contents
 ``world/tool/actual``                              per tick: simulated tool pose, 6 cm axes
 ``world/tool/manipulability_ellipsoid``            per tick: translational velocity ellipsoid
                                                    at the actual tool (half sizes 0.1·σt [m])
-``plots/kinematics/singular_values``               σ1..σ6 of the 6×7 tool Jacobian
-``plots/kinematics/singular_values_translational`` σt1..σt3 of its 3×7 translational rows
-``plots/kinematics/condition``                     condition number: full, translational
-                                                   (∞ at a singularity is stored as NaN)
-``plots/kinematics/manipulability``                w1..w4 of the full Jacobian
-``plots/kinematics/manipulability_translational``  w1..w4 of the translational Jacobian
-``plots/tracking/position_error``                  |p_actual − p_planned| [m]
-``plots/tracking/orientation_error``               rotation angle actual vs planned [rad]
-``plots/joints/position``                          measured q, 7 joints [rad]
-``plots/joints/position_limits``                   lower and upper limits, 14 constant lines
-``plots/joints/position_normalized``               (q − lower) / (upper − lower), 7 joints
-``plots/joints/position_normalized_limits``        constant lines at 0 and 1
-``plots/joints/speed``                             commanded q̇, 7 joints [rad/s]
-``plots/joints/speed_ratio``                       |q̇_cmd| / v_max, 7 joints
-``plots/joints/speed_ratio_limit``                 constant line at 1 (the speed limit)
-``plots/gripper/width``                            finger gap: commanded, measured [m]
-``plots/gripper/pad_force``                        normal force on the brick: left, right [N]
-``plots/ik/tick_us``                               controller time per tick [µs]
-``plots/ik/status``                                IK status code (0 ok, 1 no-solution,
-                                                   2 stuck, 3 limited)
-``plots/statics/holding_torque``                   joint torques holding the brick, 7 [N·m]
+``plots/...``                                      per tick: one ``Scalars`` entity per entry of
+                                                   :data:`PLOTS`, which declares each plot once
+                                                   (path, view, series, style, what it reads
+                                                   from the tick log) with its constant limit
+                                                   lines (a row at the first and the last tick)
 ``events``                                         ``TextLog`` of the run's events and verdict
 ``summary``                                        static: JSON summary (``TextDocument``)
 =================================================  ==========================================
 
 Names containing ``/`` (``wsg50/left_pad``) are escaped as one path part (``wsg50\\/left_pad``);
 unnamed bodies and geoms are called ``body<i>`` and ``geom<i>``. The file embeds a blueprint:
-the 3D scene on the left, health, tracking, joint, gripper plots and the event log on the right.
+the 3D scene on the left; on the right the plot tabs of :data:`PLOTS` (health, tracking,
+joints, gripper and IK) and the event log.
 """
 
 from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -78,10 +65,11 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from pickplace.controllers import IK_STATUSES
-from pickplace.errors import InvalidInputError, RecordingError
+from pickplace.errors import InvalidInputError, RecordingError, require_positive
 
 if TYPE_CHECKING:
     from pickplace.events import Event
+    from pickplace.scene import Scene
     from pickplace.sim import Simulation
     from pickplace.ticklog import TickLog
     from pickplace.verdict import RunResult
@@ -249,74 +237,286 @@ def _names(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int, prefix: str) -
     return [mujoco.mj_id2name(model, obj, i) or f"{prefix}{i}" for i in range(count)]
 
 
-def _series(names: list[str], colors: list[Any] | None = None, width: float = 1.5) -> Any:
-    """Static line style of a plot entity: one name (and colour) per value of a row."""
-    if colors is None:
-        colors = [JOINT_COLORS[i % len(JOINT_COLORS)] for i in range(len(names))]
-    return rr.SeriesLines(names=names, colors=colors, widths=[width] * len(names))
+# ---------------------------------------------------------------------------- the plots
+
+Color = tuple[float, ...]  # rgb or rgba in [0, 1]
+RED: Color = (0.9, 0.1, 0.1)
+IK_STATUS_NAMES = ", ".join(f"{i} {s}" for i, s in enumerate(IK_STATUSES))
+
+
+def palette(n: int, alpha: float | None = None) -> list[Color]:
+    """The joint palette over ``n`` lines (cycled), optionally with an alpha."""
+    colors: list[Color] = [JOINT_COLORS[i % len(JOINT_COLORS)] for i in range(n)]
+    return colors if alpha is None else [(*c, alpha) for c in colors]
+
+
+def one_color(color: Color) -> Callable[[int], list[Color]]:
+    """A colour rule: every one of the ``n`` lines in ``color``."""
+    return lambda n: [color] * n
+
+
+def _joint_names(sc: Scene) -> list[str]:
+    return list(sc.arm_joint_names)
+
+
+def _joint_limit_names(sc: Scene) -> list[str]:
+    joints = sc.arm_joint_names
+    return [f"{j} lower" for j in joints] + [f"{j} upper" for j in joints]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Series:
+    """A ``Scalars`` entity and its static line style: one name, colour and width per value
+    of a row.
+
+    Attributes:
+        path: Entity path.
+        names: The series names, from the scene (a tuple when they do not depend on it).
+        colors: The colours of the ``n`` lines, given ``n``.
+        width: Line width [UI points].
+    """
+
+    path: str
+    names: tuple[str, ...] | Callable[[Scene], Sequence[str]]
+    colors: Callable[[int], Sequence[Color]] = palette
+    width: float = 1.5
+
+    def __post_init__(self) -> None:
+        if not self.path.startswith("plots/"):
+            raise InvalidInputError(f"a plot's entity path starts with 'plots/', got {self.path!r}")
+        require_positive(f"line width of {self.path}", self.width)
+
+    def series_names(self, scene: Scene) -> list[str]:
+        """The names of the lines, one per value of a row, for ``scene``."""
+        return list(self.names if isinstance(self.names, tuple) else self.names(scene))
+
+    def style(self, scene: Scene) -> rr.SeriesLines:
+        """The entity's static ``SeriesLines`` for ``scene``."""
+        names = self.series_names(scene)
+        return rr.SeriesLines(
+            names=names, colors=list(self.colors(len(names))), widths=[self.width] * len(names)
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class LimitLines(Series):
+    """Constant lines drawn in a plot's view, sent as one row at the first and one at the
+    last tick.
+
+    Attributes:
+        values: The constant row, from the scene.
+    """
+
+    values: Callable[[Scene], Sequence[float] | np.ndarray]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plot(Series):
+    """One recorded plot: what it reads from the tick log, its line style and its view.
+
+    Attributes:
+        tab: The blueprint tab that holds the view (tabs appear in the order of their first
+            plot in :data:`PLOTS`).
+        title: The view's title.
+        values: ``values(log, rows)``: the plotted values of the tick log's ``rows`` (a slice
+            of T ticks), (T,) or (T, N); ±inf is recorded as NaN (a gap).
+        legend: Show the view's legend.
+        y_range: Fixed range of the view's y axis, or None for automatic.
+        limits: Constant lines shown in the same view, or None.
+    """
+
+    tab: str
+    title: str
+    values: Callable[[TickLog, slice], np.ndarray]
+    legend: bool = True
+    y_range: tuple[float, float] | None = None
+    limits: LimitLines | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.y_range is not None and not self.y_range[0] < self.y_range[1]:
+            raise InvalidInputError(
+                f"y range of {self.path} must be (low, high) with low < high, got {self.y_range}"
+            )
+
+
+# Every recorded plot, in blueprint order: its entity, view, series names and style, and what it
+# reads from the tick log. The README's entity table describes each one for users.
+PLOTS: tuple[Plot, ...] = (
+    # σ1..σ6 of the 6×7 tool Jacobian, and σt1..σt3 of its 3×7 translational rows.
+    Plot(
+        path="plots/kinematics/singular_values",
+        tab="Kinematic health",
+        title="Singular values",
+        names=tuple(f"σ{i}" for i in range(1, 7)),
+        values=lambda log, sl: log.sigma[sl],
+        legend=False,
+    ),
+    Plot(
+        path="plots/kinematics/singular_values_translational",
+        tab="Kinematic health",
+        title="Translational σ",
+        names=("σt1", "σt2", "σt3"),
+        values=lambda log, sl: log.sigma_t[sl],
+        legend=False,
+    ),
+    # Condition numbers (∞ at a singularity is recorded as NaN).
+    Plot(
+        path="plots/kinematics/condition",
+        tab="Kinematic health",
+        title="Condition",
+        names=("full", "translational"),
+        values=lambda log, sl: np.column_stack([log.condition[sl], log.condition_t[sl]]),
+    ),
+    # Manipulability measures w1..w4 of the full and of the translational Jacobian.
+    Plot(
+        path="plots/kinematics/manipulability",
+        tab="Kinematic health",
+        title="Manipulability",
+        names=("w1", "w2", "w3", "w4"),
+        values=lambda log, sl: log.manipulability[sl],
+    ),
+    Plot(
+        path="plots/kinematics/manipulability_translational",
+        tab="Kinematic health",
+        title="Manipulability (transl.)",
+        names=("w1", "w2", "w3", "w4"),
+        values=lambda log, sl: log.manipulability_t[sl],
+    ),
+    # Actual vs planned tool: |p_actual − p_planned| [m] and the rotation angle [rad].
+    Plot(
+        path="plots/tracking/position_error",
+        tab="Tracking",
+        title="Position error [m]",
+        names=("position error [m]",),
+        values=lambda log, sl: log.position_error[sl],
+    ),
+    Plot(
+        path="plots/tracking/orientation_error",
+        tab="Tracking",
+        title="Orientation error [rad]",
+        names=("orientation error [rad]",),
+        values=lambda log, sl: log.orientation_error[sl],
+    ),
+    # (q − lower) / (upper − lower) per joint, with lines at 0 and 1.
+    Plot(
+        path="plots/joints/position_normalized",
+        tab="Joints",
+        title="Joint position (normalised)",
+        names=_joint_names,
+        values=lambda log, sl: (log.q[sl] - log.scene.q_min) / (log.scene.q_max - log.scene.q_min),
+        legend=False,
+        limits=LimitLines(
+            path="plots/joints/position_normalized_limits",
+            names=("lower limit", "upper limit"),
+            values=lambda sc: [0.0, 1.0],
+            colors=one_color(RED),
+            width=2.0,
+        ),
+    ),
+    # |q̇_cmd| / v_max per joint, with the line at 1 (the speed limit).
+    Plot(
+        path="plots/joints/speed_ratio",
+        tab="Joints",
+        title="Joint speed / limit",
+        names=_joint_names,
+        values=lambda log, sl: np.abs(log.qdot_cmd[sl]) / log.scene.v_max,
+        legend=False,
+        limits=LimitLines(
+            path="plots/joints/speed_ratio_limit",
+            names=("limit",),
+            values=lambda sc: [1.0],
+            colors=one_color(RED),
+            width=2.0,
+        ),
+    ),
+    # Measured q per joint [rad], with the lower and upper limit of each.
+    Plot(
+        path="plots/joints/position",
+        tab="Joints",
+        title="Joint position [rad]",
+        names=_joint_names,
+        values=lambda log, sl: log.q[sl],
+        legend=False,
+        limits=LimitLines(
+            path="plots/joints/position_limits",
+            names=_joint_limit_names,
+            values=lambda sc: np.concatenate([sc.q_min, sc.q_max]),
+            colors=lambda n: palette(n // 2, alpha=0.45) * 2,
+            width=1.0,
+        ),
+    ),
+    # Commanded q̇ per joint [rad/s].
+    Plot(
+        path="plots/joints/speed",
+        tab="Joints",
+        title="Joint speed [rad/s]",
+        names=_joint_names,
+        values=lambda log, sl: log.qdot_cmd[sl],
+    ),
+    # Joint torques holding the brick's weight (Jᵀ statics) [N·m].
+    Plot(
+        path="plots/statics/holding_torque",
+        tab="Joints",
+        title="Holding torque [N·m]",
+        names=_joint_names,
+        values=lambda log, sl: log.holding_torque[sl],
+    ),
+    # Finger gap commanded and measured [m]; normal force on the brick per pad [N].
+    Plot(
+        path="plots/gripper/width",
+        tab="Gripper / IK",
+        title="Gripper width [m]",
+        names=("commanded", "measured"),
+        values=lambda log, sl: np.column_stack([log.gripper_cmd[sl], log.gripper_gap[sl]]),
+    ),
+    Plot(
+        path="plots/gripper/pad_force",
+        tab="Gripper / IK",
+        title="Pad force [N]",
+        names=("left", "right"),
+        values=lambda log, sl: log.pad_force[sl],
+    ),
+    # Controller time per tick [µs] and IK status code (0 ok, 1 no-solution, 2 stuck, ...).
+    Plot(
+        path="plots/ik/tick_us",
+        tab="Gripper / IK",
+        title="IK time [µs]",
+        names=("IK time [µs]",),
+        values=lambda log, sl: log.ik_us[sl],
+    ),
+    Plot(
+        path="plots/ik/status",
+        tab="Gripper / IK",
+        title="IK status",
+        names=(f"status ({IK_STATUS_NAMES})",),
+        values=lambda log, sl: log.ik_status[sl],
+        y_range=(-0.2, len(IK_STATUSES) - 0.8),
+    ),
+)
+LIMIT_LINES: tuple[LimitLines, ...] = tuple(p.limits for p in PLOTS if p.limits is not None)
+
+
+def _time_series_view(plot: Plot) -> rrb.TimeSeriesView:
+    """The plot's view: its entity, and its limit lines if it has them."""
+    kw: dict[str, Any] = {}
+    if not plot.legend:
+        kw["plot_legend"] = rrb.PlotLegend(visible=False)
+    if plot.y_range is not None:
+        kw["axis_y"] = rrb.ScalarAxis(range=plot.y_range)
+    if plot.limits is None:
+        return rrb.TimeSeriesView(name=plot.title, origin=plot.path, **kw)
+    contents = [plot.path, plot.limits.path]
+    return rrb.TimeSeriesView(name=plot.title, origin="/", contents=contents, **kw)
 
 
 def build_blueprint() -> rrb.Blueprint:
-    """3D scene left (3/5 of the width); plots and the event log right."""
-
-    def ts(name: str, origin: str, contents: list[str] | None = None, **kw: Any) -> Any:
-        if contents is None:
-            return rrb.TimeSeriesView(name=name, origin=origin, **kw)
-        return rrb.TimeSeriesView(name=name, origin="/", contents=contents, **kw)
-
-    legend = rrb.PlotLegend(visible=False)
+    """3D scene left (3/5 of the width); the tabs of :data:`PLOTS` and the event log right."""
+    tabs: dict[str, list[rrb.TimeSeriesView]] = {}
+    for plot in PLOTS:
+        tabs.setdefault(plot.tab, []).append(_time_series_view(plot))
     right = rrb.Vertical(
-        rrb.Tabs(
-            ts("Singular values", "plots/kinematics/singular_values", plot_legend=legend),
-            ts(
-                "Translational σ",
-                "plots/kinematics/singular_values_translational",
-                plot_legend=legend,
-            ),
-            ts("Condition", "plots/kinematics/condition"),
-            ts("Manipulability", "plots/kinematics/manipulability"),
-            ts("Manipulability (transl.)", "plots/kinematics/manipulability_translational"),
-            name="Kinematic health",
-        ),
-        rrb.Tabs(
-            ts("Position error [m]", "plots/tracking/position_error"),
-            ts("Orientation error [rad]", "plots/tracking/orientation_error"),
-            name="Tracking",
-        ),
-        rrb.Tabs(
-            ts(
-                "Joint position (normalised)",
-                "",
-                ["plots/joints/position_normalized", "plots/joints/position_normalized_limits"],
-                plot_legend=legend,
-            ),
-            ts(
-                "Joint speed / limit",
-                "",
-                ["plots/joints/speed_ratio", "plots/joints/speed_ratio_limit"],
-                plot_legend=legend,
-            ),
-            ts(
-                "Joint position [rad]",
-                "",
-                ["plots/joints/position", "plots/joints/position_limits"],
-                plot_legend=legend,
-            ),
-            ts("Joint speed [rad/s]", "plots/joints/speed"),
-            ts("Holding torque [N·m]", "plots/statics/holding_torque"),
-            name="Joints",
-        ),
-        rrb.Tabs(
-            ts("Gripper width [m]", "plots/gripper/width"),
-            ts("Pad force [N]", "plots/gripper/pad_force"),
-            ts("IK time [µs]", "plots/ik/tick_us"),
-            ts(
-                "IK status",
-                "plots/ik/status",
-                axis_y=rrb.ScalarAxis(range=(-0.2, len(IK_STATUSES) - 0.8)),
-            ),
-            name="Gripper / IK",
-        ),
+        *(rrb.Tabs(*views, name=name) for name, views in tabs.items()),
         rrb.Tabs(
             rrb.TextLogView(
                 name="Events",
@@ -331,7 +531,7 @@ def build_blueprint() -> rrb.Blueprint:
             rrb.TextDocumentView(name="Summary", origin="summary"),
             name="Events",
         ),
-        row_shares=[1.0, 1.0, 1.0, 1.0, 1.2],
+        row_shares=[1.0] * len(tabs) + [1.2],
     )
     scene = rrb.Spatial3DView(
         name="Scene",
@@ -639,48 +839,9 @@ class Recorder:
         )
 
     def _log_styles(self, run: Simulation) -> None:
-        rec, sc = self.rec, run.scene
-        joints = list(sc.arm_joint_names)
-        static: list[tuple[str, Any]] = [
-            ("plots/kinematics/singular_values", _series([f"σ{i}" for i in range(1, 7)])),
-            (
-                "plots/kinematics/singular_values_translational",
-                _series(["σt1", "σt2", "σt3"]),
-            ),
-            ("plots/kinematics/condition", _series(["full", "translational"])),
-            ("plots/kinematics/manipulability", _series(["w1", "w2", "w3", "w4"])),
-            ("plots/kinematics/manipulability_translational", _series(["w1", "w2", "w3", "w4"])),
-            ("plots/tracking/position_error", _series(["position error [m]"])),
-            ("plots/tracking/orientation_error", _series(["orientation error [rad]"])),
-            ("plots/joints/position", _series(joints, JOINT_COLORS)),
-            (
-                "plots/joints/position_limits",
-                _series(
-                    [f"{j} lower" for j in joints] + [f"{j} upper" for j in joints],
-                    [(*c, 0.45) for c in JOINT_COLORS] * 2,
-                    width=1.0,
-                ),
-            ),
-            ("plots/joints/position_normalized", _series(joints, JOINT_COLORS)),
-            (
-                "plots/joints/position_normalized_limits",
-                _series(["lower limit", "upper limit"], [(0.9, 0.1, 0.1)] * 2, width=2.0),
-            ),
-            ("plots/joints/speed", _series(joints, JOINT_COLORS)),
-            ("plots/joints/speed_ratio", _series(joints, JOINT_COLORS)),
-            ("plots/joints/speed_ratio_limit", _series(["limit"], [(0.9, 0.1, 0.1)], width=2.0)),
-            ("plots/gripper/width", _series(["commanded", "measured"])),
-            ("plots/gripper/pad_force", _series(["left", "right"])),
-            ("plots/ik/tick_us", _series(["IK time [µs]"])),
-            ("plots/ik/status", _series([f"status ({self._ik_status_names})"])),
-            ("plots/statics/holding_torque", _series(joints, JOINT_COLORS)),
-        ]
-        for path, arch in static:
-            rec.log(path, arch, static=True)
-        self._q_lo = np.asarray(sc.q_min, dtype=np.float64)
-        self._q_span = np.asarray(sc.q_max, dtype=np.float64) - self._q_lo
-        self._q_limits = np.concatenate([sc.q_min, sc.q_max]).astype(np.float64)
-        self._v_max = np.asarray(sc.v_max, dtype=np.float64)
+        """Log the static line style of every plot of :data:`PLOTS` and of its limit lines."""
+        for series in (*PLOTS, *LIMIT_LINES):
+            self.rec.log(series.path, series.style(run.scene), static=True)
 
     # ------------------------------------------------------------------ tick data
 
@@ -723,30 +884,8 @@ class Recorder:
             ),
         )
 
-        q = log.q[sl]
-        plots: list[tuple[str, np.ndarray]] = [
-            ("plots/kinematics/singular_values", log.sigma[sl]),
-            ("plots/kinematics/singular_values_translational", log.sigma_t[sl]),
-            (
-                "plots/kinematics/condition",
-                np.column_stack([log.condition[sl], log.condition_t[sl]]),
-            ),
-            ("plots/kinematics/manipulability", log.manipulability[sl]),
-            ("plots/kinematics/manipulability_translational", log.manipulability_t[sl]),
-            ("plots/tracking/position_error", log.position_error[sl]),
-            ("plots/tracking/orientation_error", log.orientation_error[sl]),
-            ("plots/joints/position", q),
-            ("plots/joints/position_normalized", (q - self._q_lo) / self._q_span),
-            ("plots/joints/speed", log.qdot_cmd[sl]),
-            ("plots/joints/speed_ratio", np.abs(log.qdot_cmd[sl]) / self._v_max),
-            ("plots/gripper/width", np.column_stack([log.gripper_cmd[sl], log.gripper_gap[sl]])),
-            ("plots/gripper/pad_force", log.pad_force[sl]),
-            ("plots/ik/tick_us", log.ik_us[sl]),
-            ("plots/ik/status", log.ik_status[sl]),
-            ("plots/statics/holding_torque", log.holding_torque[sl]),
-        ]
-        for path, values in plots:
-            send(path, times, _scalar_columns(values))
+        for plot in PLOTS:
+            send(plot.path, times, _scalar_columns(plot.values(log, sl)))
 
         if start == 0:
             self._send_limit_rows(log, 0)
@@ -757,11 +896,6 @@ class Recorder:
             rr.TimeColumn("sim_time", duration=_ns(log.t[tick : tick + 1])),
             rr.TimeColumn("tick", sequence=np.array([tick], dtype=np.int64)),
         ]
-        send = self.rec.send_columns
-        send("plots/joints/position_limits", times, _scalar_columns(self._q_limits[None, :]))
-        send(
-            "plots/joints/position_normalized_limits",
-            times,
-            _scalar_columns(np.array([[0.0, 1.0]])),
-        )
-        send("plots/joints/speed_ratio_limit", times, _scalar_columns(np.ones(1)))
+        for lines in LIMIT_LINES:
+            row = np.asarray(lines.values(log.scene), dtype=np.float64)
+            self.rec.send_columns(lines.path, times, _scalar_columns(row[None, :]))

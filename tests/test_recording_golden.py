@@ -1,0 +1,174 @@
+"""The recording stays what it was, and every per-tick entity holds exactly the tick log's data.
+
+``tests/data/golden_recording.json`` (written by ``scripts/golden_recording.py``, whose
+docstring says when to regenerate it) pins the entities of the nominal run's recording, their
+static components, the size and range of their temporal columns, and the embedded blueprint.
+The tick log of the very same run then fixes every value of the per-tick entities exactly.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import rerun as rr
+
+from pickplace.recording import build_blueprint
+from pickplace.scene import Scene
+from pickplace.sim import Simulation
+from pickplace.ticklog import TickLog
+from scripts.golden_recording import (
+    PATH,
+    describe_blueprint,
+    describe_recording,
+    read_columns,
+    record_nominal_run,
+)
+from scripts.golden_summaries import first_difference
+
+GOLDEN: dict[str, Any] = json.loads(PATH.read_text())
+
+
+@dataclass
+class Recorded:
+    path: Path
+    sim: Simulation
+    columns: dict[str, dict[str, Any]]
+
+    @property
+    def ticks(self) -> int:
+        return int(self.sim.ticks)
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    path = tmp_path_factory.mktemp("golden") / "nominal.rrd"
+    sim = record_nominal_run(path)
+    return Recorded(path, sim, read_columns(path))
+
+
+def test_entities_and_their_contents_are_unchanged(recorded: Recorded) -> None:
+    diff = first_difference(describe_recording(recorded.path), GOLDEN["entities"])
+    assert diff is None, diff
+
+
+def test_blueprint_is_unchanged() -> None:
+    diff = first_difference(describe_blueprint(build_blueprint()), GOLDEN["blueprint"])
+    assert diff is None, diff
+
+
+def test_the_comparison_sees_a_changed_style_and_a_missing_entity() -> None:
+    entities = GOLDEN["entities"]
+    assert first_difference(entities, entities) is None
+    plot = "plots/joints/speed"
+    changed = dict(entities[plot], static=dict(entities[plot]["static"], **{"x": 1}))
+    assert plot in str(first_difference(dict(entities, **{plot: changed}), entities))
+    fewer = {k: v for k, v in entities.items() if k != plot}
+    assert first_difference(fewer, entities) is not None
+
+
+def _inf_to_nan(a: np.ndarray) -> np.ndarray:
+    out = np.array(a, dtype=np.float64)
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
+# What each plot shows, from the tick log and the scene: (T,) or (T, N) per run.
+PLOTS: dict[str, Callable[[TickLog, Scene], np.ndarray]] = {
+    "plots/kinematics/singular_values": lambda log, sc: log.sigma,
+    "plots/kinematics/singular_values_translational": lambda log, sc: log.sigma_t,
+    "plots/kinematics/condition": lambda log, sc: np.column_stack([log.condition, log.condition_t]),
+    "plots/kinematics/manipulability": lambda log, sc: log.manipulability,
+    "plots/kinematics/manipulability_translational": lambda log, sc: log.manipulability_t,
+    "plots/tracking/position_error": lambda log, sc: log.position_error,
+    "plots/tracking/orientation_error": lambda log, sc: log.orientation_error,
+    "plots/joints/position": lambda log, sc: log.q,
+    "plots/joints/position_normalized": lambda log, sc: (log.q - sc.q_min) / (sc.q_max - sc.q_min),
+    "plots/joints/speed": lambda log, sc: log.qdot_cmd,
+    "plots/joints/speed_ratio": lambda log, sc: np.abs(log.qdot_cmd) / sc.v_max,
+    "plots/gripper/width": lambda log, sc: np.column_stack([log.gripper_cmd, log.gripper_gap]),
+    "plots/gripper/pad_force": lambda log, sc: log.pad_force,
+    "plots/ik/tick_us": lambda log, sc: log.ik_us,
+    "plots/ik/status": lambda log, sc: log.ik_status,
+    "plots/statics/holding_torque": lambda log, sc: log.holding_torque,
+}
+# The constant lines: one row at the first and one at the last tick.
+LIMIT_LINES: dict[str, Callable[[Scene], list[float]]] = {
+    "plots/joints/position_limits": lambda sc: [*sc.q_min, *sc.q_max],
+    "plots/joints/position_normalized_limits": lambda sc: [0.0, 1.0],
+    "plots/joints/speed_ratio_limit": lambda sc: [1.0],
+}
+
+
+def test_every_plot_entity_is_known_here(recorded: Recorded) -> None:
+    plots = {p for p in recorded.columns if p.startswith("plots/")}
+    assert plots == set(PLOTS) | set(LIMIT_LINES)
+
+
+@pytest.mark.parametrize("path", sorted(PLOTS))
+def test_plot_rows_are_the_tick_log_values(recorded: Recorded, path: str) -> None:
+    sim, n = recorded.sim, recorded.ticks
+    rows = recorded.columns[path]["rows"]
+    assert rows["tick"] == list(range(n))
+    np.testing.assert_array_equal(
+        np.array(rows["sim_time"]), np.round(sim.log.t[:n] * 1e9).astype(np.int64)
+    )
+    expected = _inf_to_nan(PLOTS[path](sim.log, sim.scene)[:n]).reshape(n, -1)
+    np.testing.assert_array_equal(np.array(rows["Scalars:scalars"]), expected)
+
+
+@pytest.mark.parametrize("path", sorted(LIMIT_LINES))
+def test_limit_lines_have_a_row_at_the_first_and_the_last_tick(
+    recorded: Recorded, path: str
+) -> None:
+    rows = recorded.columns[path]["rows"]
+    assert rows["tick"] == [0, recorded.ticks - 1]
+    value = LIMIT_LINES[path](recorded.sim.scene)
+    assert rows["Scalars:scalars"] == [value, value]
+
+
+def _xyzw(wxyz: np.ndarray) -> np.ndarray:
+    return wxyz[..., [1, 2, 3, 0]]
+
+
+def test_tool_frames_bodies_and_ellipsoid_are_the_tick_log_poses(recorded: Recorded) -> None:
+    log, n, cols = recorded.sim.log, recorded.ticks, recorded.columns
+
+    def rows32(path: str, component: str) -> np.ndarray:
+        rows = cols[path]["rows"]
+        assert rows["tick"] == list(range(n)), path
+        return np.array([row[0] for row in rows[component]], dtype=np.float32)
+
+    poses = {
+        "world/tool/planned": (log.p_WG_plan, log.quat_WG_plan),
+        "world/tool/commanded": (log.p_WG_cmd, log.quat_WG_cmd),
+        "world/tool/actual": (log.p_WG, log.quat_WG),
+    }
+    model = recorded.sim.model
+    for b in range(1, model.nbody):
+        if model.body_weldid[b] != 0:
+            name = rr.escape_entity_path_part(model.body(b).name)
+            poses[f"world/bodies/{name}"] = (log.body_pos[:, b], log.body_quat[:, b])
+    assert len(poses) > 3
+    for path, (p, quat) in poses.items():
+        translation = rows32(path, "Transform3D:translation")
+        np.testing.assert_array_equal(translation, p[:n].astype(np.float32), err_msg=path)
+        quaternion = rows32(path, "Transform3D:quaternion")
+        np.testing.assert_array_equal(quaternion, _xyzw(quat[:n]).astype(np.float32), path)
+    ellipsoid = "world/tool/manipulability_ellipsoid"
+    half = 0.1 * log.sigma_t[:n]
+    half[~np.isfinite(half)] = 0.0
+    np.testing.assert_array_equal(
+        rows32(ellipsoid, "Ellipsoids3D:half_sizes"), half.astype(np.float32)
+    )
+    np.testing.assert_array_equal(
+        rows32(ellipsoid, "Ellipsoids3D:centers"), log.p_WG[:n].astype(np.float32)
+    )
+    np.testing.assert_array_equal(
+        rows32(ellipsoid, "Ellipsoids3D:quaternions"), _xyzw(log.quat_t[:n]).astype(np.float32)
+    )
