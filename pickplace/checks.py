@@ -21,10 +21,12 @@ import enum
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from pickplace.controllers import IK_STATUSES, IKStatus
 from pickplace.events import Emit
+from pickplace.grasp import brick_width_across
 from pickplace.plan import Plan
 from pickplace.scene import Scene
 from pickplace.ticklog import CONTROLLER_NONFINITE, FINITE, TickLog
@@ -37,11 +39,13 @@ class FailureReason(enum.Enum):
 
     MISSED_GRASP = "missed-grasp"
     DROPPED = "dropped"
+    COLLISION = "collision"
     IK_FAILED = "ik-failed"
     LIMIT_VIOLATED = "limit-violated"
     NOT_IN_TARGET_BIN = "not-in-target-bin"
     NAN = "nan"
     INTERRUPTED = "interrupted"
+    NO_FEASIBLE_PLAN = "no-feasible-plan"
 
     def __str__(self) -> str:
         return self.value
@@ -122,6 +126,14 @@ class CheckContext:
     criteria: SuccessCriteria
     dt: float
     emit: Emit
+
+
+def grasp_width(plan: Plan, scene: Scene) -> float:
+    """Width of the brick between the fingers under the plan's grasp [m] (the brick's width
+    across its y axis when the plan grasps nothing)."""
+    if plan.X_OG is None:
+        return scene.brick_width
+    return brick_width_across(plan.X_OG, scene.brick_half_extents)
 
 
 def first_tick(mask: np.ndarray, k0: int) -> int | None:
@@ -237,6 +249,31 @@ class PositionLimitCheck(Check):
         return Failure(k, FailureReason.LIMIT_VIOLATED, text)
 
 
+class CollisionCheck(Check):
+    """A robot geom (arm link, palm, finger) touched the world (a bin, the floor, an obstacle).
+
+    The pads on the brick are the only contacts a plan intends, and the brick is not part of
+    the world: any robot-world contact counts, at the tick it starts, named by its two geoms
+    (the deepest pair, found again from the logged state) and its force.
+    """
+
+    def __init__(self, ctx: CheckContext) -> None:
+        self.ctx = ctx
+        self.data = mujoco.MjData(ctx.scene.model)
+
+    def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
+        k = first_tick(log.robot_world_contacts[k0:k1] > 0, k0)
+        if k is None:
+            return None
+        scene = self.ctx.scene
+        pair = "a robot geom touched the world"
+        for contact in scene.robot_world_contacts(scene.model, log.restore(k, self.data)):
+            pair = f"{scene.geom_name(contact.geom)} touched {scene.geom_name(contact.other)}"
+            break
+        text = f"{pair} with {log.robot_world_force[k]:.1f} N at t={k * self.ctx.dt:.3f} s"
+        return Failure(k, FailureReason.COLLISION, text)
+
+
 class GraspState(enum.Enum):
     """Where the brick is with respect to the gripper."""
 
@@ -266,7 +303,7 @@ class GraspMonitor(Check):
         self.state = GraspState.OPEN
         self.p_GO_grasp: np.ndarray | None = None
         self.contact_lost_since: float | None = None
-        self.brick_width = ctx.scene.brick_width
+        self.brick_width = grasp_width(ctx.plan, ctx.scene)
         self.firm_force = ctx.criteria.grasp_force_fraction * ctx.scene.gripper_force_limit
 
     def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
@@ -359,6 +396,7 @@ PLACE_CHECKS: tuple[type[Check], ...] = (
     TrackingCheck,
     SpeedLimitCheck,
     PositionLimitCheck,
+    CollisionCheck,
     GraspMonitor,
 )
 REACH_CHECKS: tuple[type[Check], ...] = (
@@ -366,4 +404,5 @@ REACH_CHECKS: tuple[type[Check], ...] = (
     QPSolutionCheck,
     SpeedLimitCheck,
     PositionLimitCheck,
+    CollisionCheck,
 )

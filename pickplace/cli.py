@@ -92,6 +92,18 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--pace", type=_finite_float, help="run at most this many times real time")
     run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
+    plan = sub.add_parser(
+        "plan", help="plan a scenario and pre-flight its candidates, without physics"
+    )
+    plan.add_argument("--scene", type=Path, help="MJCF scene file (default: scenes/scene.xml)")
+    plan.add_argument(
+        "--scenario", default="pick-place", help="scenario name (pickplace scenarios)"
+    )
+    plan.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    plan.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
+    plan.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
+    plan.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
     sub.add_parser("scenarios", help="list the scenarios").add_argument(
         "--json", action="store_true", help="print a JSON object on stdout"
     )
@@ -227,6 +239,63 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK if result.success else EXIT_FAILED
 
 
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from pickplace.runner import RunRequest, plan_report
+
+    req = RunRequest(
+        scenario=args.scenario,
+        controller=args.controller,
+        seed=args.seed,
+        brick=args.brick,
+        scene_path=args.scene,
+    )
+    report = plan_report(req)
+    out = {
+        "scenario": req.scenario,
+        "controller": req.controller,
+        "seed": req.seed,
+        **report.as_dict(),
+        "planning_time_s": report.planning_time_s,
+    }
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(_human_plan(out))
+    return EXIT_OK if report.feasible else EXIT_FAILED
+
+
+def _human_plan(p: dict[str, Any]) -> str:
+    n = len(p["candidates"])
+    head = f"{p['scenario']} / {p['controller']} / seed {p['seed']}: "
+    if p["feasible"]:
+        head += f"feasible plan '{p['chosen']}' ({n} candidate(s) tried"
+    else:
+        head += f"NO feasible plan ({n} candidate(s) tried"
+    lines = [head + f" in {p['planning_time_s'] * 1000:.1f} ms)"]
+    m = p["margins"]
+    if m:
+        lines.append(
+            f"  margins: min clearance {m['min_clearance_m'] * 1000:.1f} mm, min joint margin "
+            f"{m['min_joint_margin_rad']:.3f} rad, peak speed ratio {m['peak_speed_ratio']:.2f}, "
+            f"σmin {m['min_singular_value']:.3f}"
+        )
+    lines.append("  candidates:")
+    for i, c in enumerate(p["candidates"], 1):
+        pr = c["problem"]
+        verdict = "feasible" if pr is None else f"at t={pr['t']:.2f} s {pr['kind']}: {pr['text']}"
+        lines.append(f"    {i}. {c['label']}: {verdict}")
+    lines.append(
+        "  keyframes (chosen plan):" if p["feasible"] else "  keyframes (first candidate):"
+    )
+    for k in p["keyframes"]:
+        x, y, z = k["position"]
+        lines.append(
+            f"    {k['t']:6.2f} s  {k['name']:<12} p=({x:.3f}, {y:.3f}, {z:.3f}) m  "
+            f"width {k['gripper_width'] * 1000:.0f} mm"
+        )
+    return "\n".join(lines)
+
+
 def _cmd_scenarios(args: argparse.Namespace) -> int:
     if args.json:
         print(
@@ -281,7 +350,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
-        handlers = {"run": _cmd_run, "scenarios": _cmd_scenarios, "sweep": _cmd_sweep}
+        handlers = {
+            "run": _cmd_run,
+            "plan": _cmd_plan,
+            "scenarios": _cmd_scenarios,
+            "sweep": _cmd_sweep,
+        }
         return handlers[args.command](args)
     except PickPlaceError as exc:
         _print_error(_error_text(exc))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from pickplace.errors import SceneError
 from pickplace.scene import Scene
 from pickplace.task import World
 
@@ -67,11 +68,16 @@ class HeavyBrick:
     def apply(self, world: World, tick: int) -> str | None:
         if tick != 0:
             return None
-        m = world.model
+        m, d = world.model, world.data
         scale = self.MASS / m.body_mass[self.body]
         m.body_mass[self.body] *= scale
         m.body_inertia[self.body] *= scale
-        mujoco.mj_setConst(m, world.data)
+        # mj_setConst recomputes the model's constants from qpos0 and leaves qpos and qvel at
+        # qpos0 and 0: keep the state the run is in.
+        qpos, qvel = d.qpos.copy(), d.qvel.copy()
+        mujoco.mj_setConst(m, d)
+        d.qpos[:], d.qvel[:] = qpos, qvel
+        mujoco.mj_forward(m, d)
         return f"brick mass set to {self.MASS:.0f} kg"
 
 
@@ -103,6 +109,42 @@ class Knock:
         if active and t - world.dt < self._t_hit:
             return f"{-self.FORCE_W[2]:.0f} N downward blow on the brick for {self.DURATION} s"
         return None
+
+
+class Obstacle:
+    """After planning, a 0.12 m box appears in the transfer path: the plan runs into it.
+
+    The scene parks a mocap body ``obstacle`` far out of the way; at tick 0 this fault moves
+    it onto the planned tool path: the point of the middle half of the plan's transport phase
+    farthest from where the tool is when it appears. The checks must report the robot's
+    collision at the tick of first contact.
+    """
+
+    name = "obstacle"
+    BODY = "obstacle"
+
+    def __init__(self, scene: Scene) -> None:
+        m = scene.model
+        self.body = int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, self.BODY))
+        if self.body < 0 or m.body_mocapid[self.body] < 0:
+            raise SceneError(f"the obstacle fault needs a mocap body '{self.BODY}' in the scene")
+        self.mocap = int(m.body_mocapid[self.body])
+
+    def apply(self, world: World, tick: int) -> str | None:
+        if tick != 0 or world.plan.phases is None:
+            return None
+        start, end = world.plan.phases.transport
+        sample = world.plan.trajectory.sample
+        quarter = 0.25 * (end - start)
+        times = np.linspace(start + quarter, end - quarter, 51).tolist()
+        path = np.array([sample(t)[0][4:] for t in times])
+        p_now = sample(tick * world.dt)[0][4:]
+        p_W = path[int(np.argmax(np.linalg.norm(path - p_now, axis=1)))]
+        m, d = world.model, world.data
+        d.mocap_pos[self.mocap] = p_W
+        mujoco.mj_forward(m, d)
+        x, y, z = p_W.tolist()
+        return f"a box appeared at ({x:.2f}, {y:.2f}, {z:.2f}) m, in the planned transfer path"
 
 
 class InjectNaN:

@@ -24,6 +24,7 @@ from pickplace.checks import (
     Failure,
     FailureReason,
     SuccessCriteria,
+    grasp_width,
 )
 from pickplace.scene import BinGeometry, Scene
 from pickplace.verdict import brick_at_rest, placement_problems
@@ -47,9 +48,7 @@ class Goal(ABC):
         """After the plan has ended: is there nothing left to wait for? (The brick at rest.)"""
         return brick_at_rest(scene, data, criteria)
 
-    def final_failure(
-        self, scene: Scene, data: mujoco.MjData, criteria: SuccessCriteria, tick: int
-    ) -> Failure | None:
+    def final_failure(self, ctx: CheckContext, data: mujoco.MjData, tick: int) -> Failure | None:
         """The verdict on the end state at ``tick``, when no check failed during the run."""
         return None
 
@@ -78,11 +77,10 @@ class PlaceGoal(Goal):
         speed and position limits, the grasp monitor."""
         return [check(ctx) for check in _checks.PLACE_CHECKS]
 
-    def final_failure(
-        self, scene: Scene, data: mujoco.MjData, criteria: SuccessCriteria, tick: int
-    ) -> Failure | None:
+    def final_failure(self, ctx: CheckContext, data: mujoco.MjData, tick: int) -> Failure | None:
         """not-in-target-bin, listing every placement problem, unless the brick rests there."""
-        problems = placement_problems(scene, data, self.bin, criteria)
+        width = grasp_width(ctx.plan, ctx.scene)
+        problems = placement_problems(ctx.scene, data, self.bin, ctx.criteria, width)
         if not problems:
             return None
         return Failure(tick, FailureReason.NOT_IN_TARGET_BIN, "; ".join(problems))

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError
@@ -144,3 +145,10 @@ def choose_place_pose(X_WO_goal: SE3, X_OG: SE3, X_WG_reference: SE3) -> SE3:
     if _yaw_change(second, yaw) < _yaw_change(first, yaw):
         return second
     return first
+
+
+def brick_width_across(X_OG: SE3, half_extents: npt.ArrayLike) -> float:
+    """Width of the brick between the fingers under grasp ``X_OG`` [m]: the box's extent along
+    the tool's closing axis (G's y), 2 Σᵢ |y_G · eᵢ| hᵢ for half extents hᵢ along O's axes eᵢ."""
+    y_O = X_OG.rotation().as_matrix()[:, 1]  # G's closing axis in the brick frame
+    return float(2.0 * np.abs(y_O) @ np.asarray(half_extents, dtype=np.float64))

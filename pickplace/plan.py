@@ -17,7 +17,7 @@ import numpy.typing as npt
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError, require_finite, require_non_negative, require_positive
-from pickplace.geometry import require_pose, rotation_angle, slerp, wrap_angle
+from pickplace.geometry import require_pose, rotation_angle, rotation_log, slerp, wrap_angle
 from pickplace.grasp import choose_grasp, choose_place_pose
 from pickplace.trajectory import Keyframe, MotionProfile, PoseTrajectory, profile_by_name
 
@@ -217,7 +217,7 @@ def _raised(X_WG: SE3, height: float) -> SE3:
     )
 
 
-def _swung(X_WG: SE3, p_W_to: np.ndarray, p_W_base: np.ndarray | None) -> SE3:
+def swung_pose(X_WG: SE3, p_W_to: np.ndarray, p_W_base: np.ndarray | None) -> SE3:
     """``X_WG`` rotated about the vertical base axis until it faces ``p_W_to``.
 
     The result is the tool pose the arm would carry along if only its base joint turned, the
@@ -225,10 +225,36 @@ def _swung(X_WG: SE3, p_W_to: np.ndarray, p_W_base: np.ndarray | None) -> SE3:
     """
     if p_W_base is None:
         return X_WG
-    a = X_WG.translation()[:2] - p_W_base[:2]
-    b = np.asarray(p_W_to)[:2] - p_W_base[:2]
-    swing = wrap_angle(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]))
+    swing = _swing(X_WG.translation(), p_W_to, p_W_base)
     return SE3.from_rotation(SO3.from_z_radians(swing)) @ X_WG
+
+
+VIA_ORIENTATIONS = ("swing", "shortest")
+"""How the clearance via-point's orientation is chosen (see :func:`plan_pick_place`)."""
+
+# A relative rotation whose axis is this close to world z is a turn about z [-].
+_VERTICAL_AXIS_TOL = 1e-9
+
+
+def _swing(p_W_from: np.ndarray, p_W_to: np.ndarray, p_W_base: np.ndarray) -> float:
+    """Azimuth change about the base's vertical axis from one point to another [rad]."""
+    a, b = p_W_from[:2] - p_W_base[:2], np.asarray(p_W_to)[:2] - p_W_base[:2]
+    return wrap_angle(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]))
+
+
+def _swing_halfway(R_a: SO3, R_b: SO3, swing: float) -> SO3:
+    """Halfway from ``R_a`` to ``R_b`` turning about world z in the base swing's direction.
+
+    When ``R_b R_aᵀ`` is a turn by δ about world z, the total turn taken is
+    Δ = swing + wrap(δ − swing): the base's swing plus the wrist's own change, which can exceed
+    π; the result is Rz(Δ/2) R_a. Otherwise (not a pure turn about z) the shortest-arc slerp.
+    """
+    phi = rotation_log(R_b @ R_a.inverse())  # world-frame rotation vector from R_a to R_b
+    if float(np.linalg.norm(phi[:2])) > _VERTICAL_AXIS_TOL:
+        return slerp(R_a, R_b, 0.5)
+    delta = float(phi[2])
+    total = swing + wrap_angle(delta - swing)
+    return SO3.from_z_radians(0.5 * total) @ R_a
 
 
 def plan_pick_place(
@@ -239,6 +265,8 @@ def plan_pick_place(
     config: PlanConfig = DEFAULT_PLAN_CONFIG,
     grasp_height: float = 0.0,
     p_W_base: npt.ArrayLike | None = None,
+    X_OG: SE3 | None = None,
+    via: str = "swing",
 ) -> Plan:
     """A plan that picks the brick at ``X_WO_pick`` and places it at ``X_WO_place``.
 
@@ -246,7 +274,7 @@ def plan_pick_place(
     along the approach axis, i.e. up), ``pick``, ``settle`` (same pose, ``settle_time`` later;
     omitted if ``settle_time`` is 0), ``grip-closed`` (same pose, ``close_time`` later),
     ``lift`` (pick raised by ``lift_height``), ``clearance`` (xy midway between lift and
-    pre-place, z = ``clearance_z``, orientation halfway by slerp), ``pre-place``, ``place``,
+    pre-place, z = ``clearance_z``, orientation halfway, see ``via``), ``pre-place``, ``place``,
     ``release`` (same pose, ``open_time`` later) and ``retreat`` (place backed off by
     ``approach_distance``). Widths are open up to ``settle``, closed from ``grip-closed`` to
     ``place``, open at ``release`` and ``retreat``; the gripper closes across the
@@ -265,6 +293,13 @@ def plan_pick_place(
             close to the base and folds the elbow), and the grasp and place yaws are chosen
             relative to the tool yaw carried along by the base rotation, so the wrist does not
             wind up.
+        X_OG: The grasp to use; by default the top-down grasp (of the brick's two symmetric
+            ones) whose yaw is nearest the tool's, carried along by the base swing.
+        via: Orientation of the clearance via-point: ``"swing"`` (default) turns the tool
+            about world z with the base swing plus the wrist's own yaw change, halfway; it
+            equals the shortest arc whenever that total turn is under π, and goes the long
+            way round with the swing otherwise. ``"shortest"``: halfway along the shortest
+            arc (slerp), which can turn the wrist against the base swing.
 
     Returns:
         The trajectory through the timed keyframes, the phases (approach: pre-pick → pick;
@@ -278,13 +313,17 @@ def plan_pick_place(
     require_pose("X_WO_place", X_WO_place)
     clearance_z = require_finite("clearance_z [m]", clearance_z, PlanError)
 
+    if via not in VIA_ORIENTATIONS:
+        raise PlanError(f"via must be one of {', '.join(VIA_ORIENTATIONS)}, got {via!r}")
     base = None if p_W_base is None else np.asarray(p_W_base, dtype=np.float64)
-    X_OG = choose_grasp(
-        X_WO_pick, _swung(X_WG_initial, X_WO_pick.translation(), base), grasp_height
-    )
+    if X_OG is None:
+        X_OG = choose_grasp(
+            X_WO_pick, swung_pose(X_WG_initial, X_WO_pick.translation(), base), grasp_height
+        )
+    require_pose("X_OG", X_OG)
     X_WG_pick = X_WO_pick @ X_OG
     X_WG_place = choose_place_pose(
-        X_WO_place, X_OG, _swung(X_WG_pick, X_WO_place.translation(), base)
+        X_WO_place, X_OG, swung_pose(X_WG_pick, X_WO_place.translation(), base)
     )
     X_WG_lift = _raised(X_WG_pick, config.lift_height)
     X_WG_pre_place = _backed_off(X_WG_place, config.approach_distance)
@@ -300,9 +339,11 @@ def plan_pick_place(
             [base[0] + radius * math.cos(azimuth), base[1] + radius * math.sin(azimuth), 0.0]
         )
     p_clearance[2] = clearance_z
-    X_WG_clearance = SE3.from_rotation_and_translation(
-        slerp(X_WG_lift.rotation(), X_WG_pre_place.rotation(), 0.5), p_clearance
-    )
+    R_lift, R_pre_place = X_WG_lift.rotation(), X_WG_pre_place.rotation()
+    R_clearance = slerp(R_lift, R_pre_place, 0.5)
+    if via == "swing" and base is not None:
+        R_clearance = _swing_halfway(R_lift, R_pre_place, _swing(p_lift, p_pre_place, base))
+    X_WG_clearance = SE3.from_rotation_and_translation(R_clearance, p_clearance)
 
     w_open, w_closed = config.open_width, config.closed_width
     waypoints = [

@@ -770,7 +770,7 @@ class Recorder:
             rec.log(path, pose, shape, static=True)
         self._moving = []
         for b in range(1, model.nbody):
-            if model.body_weldid[b] != 0:
+            if model.body_weldid[b] != 0 or model.body_mocapid[b] >= 0:
                 self._moving.append((b, body_paths[b]))
             elif b in used:
                 pose = rr.Transform3D(translation=data.xpos[b], quaternion=_quat(data.xquat[b]))
@@ -837,6 +837,38 @@ class Recorder:
             ),
             static=True,
         )
+        self._log_rejected(run)
+
+    def _log_rejected(self, run: Simulation) -> None:
+        """Each candidate plan the planner rejected: its path, thin and grey, and a red marker
+        where its first problem happened (contact point, limited joint or tool), labelled."""
+        planning = run.task.planning
+        if planning is None:
+            return
+        for i, c in enumerate(planning.candidates):
+            problem = c.preflight.problem
+            if problem is None:
+                continue
+            base = f"world/plan/rejected/{i}"
+            self.rec.log(
+                f"{base}/path",
+                rr.LineStrips3D(
+                    [c.plan.trajectory.sample_path(200)],
+                    colors=[[0.55, 0.55, 0.6]],
+                    radii=[0.0015],
+                ),
+                static=True,
+            )
+            self.rec.log(
+                f"{base}/problem",
+                rr.Points3D(
+                    [problem.point_W],
+                    radii=[0.012],
+                    colors=[[0.95, 0.15, 0.15]],
+                    labels=[f"{c.label}: {problem.kind} at t={problem.t:.2f} s"],
+                ),
+                static=True,
+            )
 
     def _log_styles(self, run: Simulation) -> None:
         """Log the static line style of every plot of :data:`PLOTS` and of its limit lines."""

@@ -12,13 +12,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-from mink.lie import SE3
-
-from pickplace.controllers import CONTROLLERS, QPController, ResolvedRateGains, make_controller
+from pickplace.controllers import CONTROLLERS, make_controller
 from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.planner import Candidate, PlanningReport
+from pickplace.preflight import Preflight, PreflightConfig
 from pickplace.scenarios import (
     BrickPlacement,
+    BuildRequest,
     Scenario,
     check_brick_in_source_bin,
     get_scenario,
@@ -31,10 +31,6 @@ from pickplace.verdict import RunResult
 CONTROL_RATE_RANGE_HZ = (100.0, 1000.0)
 PACE_RANGE = (0.01, 1000.0)
 MAX_SEED = 2**32 - 1
-# Reachability check of a user-given brick pose: the IK must bring the tool within these
-# distances of the pick and pre-pick poses [m, rad].
-REACH_POSITION_TOLERANCE = 1e-3
-REACH_ORIENTATION_TOLERANCE = 1e-2
 
 
 @dataclass(frozen=True)
@@ -133,55 +129,64 @@ def validate_request(req: RunRequest) -> Scenario:
     return scenario
 
 
-def check_reachable(scene: Scene, X_WG_targets: Sequence[tuple[str, SE3]]) -> None:
-    """Raise InvalidInputError unless the IK can bring the tool onto each target pose.
+def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, Task]:
+    """Validate ``req``, load the scene and build the scenario's task (planning included).
 
-    Iterates the qp controller from the home posture (deadbeat gains, 0.1 s steps, joint limits
-    and speed limits in force) for at most 200 steps per target.
+    Raises:
+        PickPlaceError: Any invalid input (see :func:`validate_request`) or a bad scene file;
+            a ``--brick`` pose outside bin 1, or one for which no candidate plan is feasible
+            (field ``brick``: the message gives the first candidate's problem and what would
+            help).
     """
-    dt = 0.1
-    ctrl = QPController(scene, dt, gains=ResolvedRateGains(1.0 / dt, 1.0 / dt))
-    zero = np.zeros(6)
-    for name, X in X_WG_targets:
-        q = scene.q_home.copy()
-        err = np.inf * np.ones(6)
-        for _ in range(200):
-            res = ctrl.command(q, X, zero)
-            err = res.error
-            if (
-                np.linalg.norm(err[:3]) < REACH_POSITION_TOLERANCE
-                and np.linalg.norm(err[3:]) < REACH_ORIENTATION_TOLERANCE
-            ):
-                break
-            q = q + res.qdot * dt
-        else:
-            raise InvalidInputError(
-                f"the brick pose is unreachable: the arm gets no closer than "
-                f"{np.linalg.norm(err[:3]) * 1000:.0f} mm to the {name} pose",
-                field="brick",
-            )
+    scenario = validate_request(req)
+    scene = load_scene(req.scene_path)
+    if req.brick is not None:
+        check_brick_in_source_bin(scene, req.brick)
+    task = scenario.build(
+        BuildRequest(scene, scenario.name, req.seed, req.brick, controller=req.controller)
+    )
+    planning = task.planning
+    infeasible = planning is not None and not planning.feasible
+    if refuse_infeasible and req.brick is not None and planning is not None and infeasible:
+        first = planning.candidates[0]
+        problem = first.preflight.problem
+        why = f"at t={problem.t:.2f} s {problem.text}" if problem else "infeasible"
+        b = req.brick
+        raise InvalidInputError(
+            f"no feasible plan picks the brick at x={b.x:g} m, y={b.y:g} m, yaw={b.yaw:g} rad: "
+            f"{len(planning.candidates)} candidates tried, the first ({first.label}) {why}; "
+            f"move it inwards or turn it (pickplace plan --brick={b.x:g},{b.y:g},{b.yaw:g} "
+            "lists every candidate)",
+            field="brick",
+        )
+    return scene, task
+
+
+def plan_report(req: RunRequest) -> PlanningReport:
+    """The planning of ``req``'s scenario without physics (``pickplace plan``): its candidates
+    and their pre-flights. A scenario that executes its plan without a pre-flight gets one
+    here, as a single candidate, so that every plan can be asked whether it is feasible.
+
+    Raises:
+        PickPlaceError: Invalid input (an infeasible ``--brick`` pose is reported, not refused).
+    """
+    scene, task = build_task(req, refuse_infeasible=False)
+    if task.planning is not None:
+        return task.planning
+    t0 = time.perf_counter()
+    result = Preflight(scene, req.controller).run(task.plan, task.X_WO_start, task.goal.X_WO_goal)
+    candidate = Candidate("the scenario's plan (executed without a pre-flight)", task.plan, result)
+    chosen = 0 if result.feasible else None
+    return PlanningReport((candidate,), chosen, time.perf_counter() - t0, PreflightConfig())
 
 
 def prepare(req: RunRequest) -> tuple[Scene, Task, Simulation]:
     """Validate ``req`` and build the simulation (nothing stepped yet).
 
     Raises:
-        PickPlaceError: Any invalid input (see :func:`validate_request`), a bad scene file,
-            or an unreachable brick pose.
+        PickPlaceError: Any invalid input (see :func:`build_task`).
     """
-    scenario = validate_request(req)
-    scene = load_scene(req.scene_path)
-    if req.brick is not None:
-        check_brick_in_source_bin(scene, req.brick)
-    task = scenario.build(scene, scenario.name, req.seed, req.brick)
-    phases = task.plan.phases
-    if req.brick is not None and phases is not None:
-        sample = task.plan.trajectory.sample
-        targets = [
-            (name, SE3(sample(t)[0]))
-            for name, t in zip(("pre-grasp", "grasp"), phases.approach, strict=True)
-        ]
-        check_reachable(scene, targets)
+    scene, task = build_task(req)
     config = SimConfig(control_rate_hz=req.control_rate_hz)
     dt = 1.0 / req.control_rate_hz
     controller = make_controller(req.controller, scene, dt)
@@ -232,4 +237,4 @@ class Pacer:
         return None
 
 
-__all__ = ["RunRequest", "check_reachable", "prepare", "run"]
+__all__ = ["RunRequest", "build_task", "plan_report", "prepare", "run"]

@@ -18,23 +18,19 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace import faults
-from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.errors import InvalidInputError, PlanError, UnknownNameError
 from pickplace.geometry import box_corners, transform_points
 from pickplace.goals import PlaceGoal, ReachGoal
 from pickplace.grasp import brick_pose, top_down_rotation, yaw_of
 from pickplace.kinematics import ArmKinematics
-from pickplace.plan import Plan, PlanConfig, Waypoint, plan_pick_place, time_keyframes
+from pickplace.plan import Plan, PlanConfig, Waypoint, time_keyframes
+from pickplace.planner import PickPlacePlanner
 from pickplace.scene import Scene
 from pickplace.task import Fault, Task
 from pickplace.trajectory import PoseTrajectory
 
-# Margin kept between the brick's centre and bin 1's inner walls when drawing random poses [m]:
-# the brick's half-diagonal (0.045 m) plus the open fingers' reach beyond the brick
-# (0.10 m opening − 0.05 m width) / 2 = 0.025 m, so that open fingers clear the walls.
-RANDOM_WALL_MARGIN = 0.07
-# Clearance of the via-point above the higher bin wall: brick height hanging below the tool
-# (0.025 m half-height) plus 0.1 m of air.
-CLEARANCE_ABOVE_WALLS = 0.125
+# Most brick poses pick-place-random draws before it gives up finding a feasible one.
+MAX_RANDOM_DRAWS = 100
 # Reach scenario: how far beyond the arm's reach the straight line's far end lies [m].
 REACH_OVERSHOOT = 0.03
 # Reach scenario: time spent pulling at the unreachable far end before coming back [s].
@@ -55,16 +51,12 @@ def brick_on_floor(scene: Scene, p: BrickPlacement, bin_floor_z: float) -> SE3:
     return brick_pose(p.x, p.y, bin_floor_z + float(scene.brick_half_extents[2]), p.yaw)
 
 
-def check_brick_in_source_bin(
-    scene: Scene, p: BrickPlacement, open_width: float | None = None
-) -> None:
-    """Raise InvalidInputError unless the brick at ``p`` lies in bin 1 and can be grasped.
+def check_brick_in_source_bin(scene: Scene, p: BrickPlacement) -> None:
+    """Raise InvalidInputError unless the brick at ``p`` lies flat inside bin 1's inner walls.
 
-    The brick's footprint must be inside bin 1's inner walls, and so must the open fingers
-    around it: they reach ``open_width / 2 + scene.finger_outer_offset`` from the brick's
-    centre along its y axis (the closing axis), over the pads' width along its x axis.
+    Whether it can be picked there (the open hand's whole footprint, the arm's reach) is the
+    planner's question, answered by the pre-flight of its candidates.
     """
-    open_width = PlanConfig().open_width if open_width is None else open_width
     values = (p.x, p.y, p.yaw)
     where = f"brick pose x={p.x:g} m, y={p.y:g} m, yaw={p.yaw:g} rad"
     if not all(math.isfinite(v) for v in values):
@@ -81,59 +73,66 @@ def check_brick_in_source_bin(
             f"[{c[1] - h[1]:.2f}, {c[1] + h[1]:.2f}] m minus the brick's half-size",
             field="brick",
         )
-    reach = open_width / 2 + scene.finger_outer_offset
-    if not bin_.contains_xy(transform_points(X_WO, box_corners([0.01, reach, 0.0]))):
-        raise InvalidInputError(
-            f"{where} is too close to {bin_.name}'s walls to grasp: the open fingers reach "
-            f"{reach * 1000:.0f} mm from the brick's centre across its width; move it inwards "
-            "or turn it so that its long side faces the wall",
-            field="brick",
-        )
 
 
-def home_tool_pose(scene: Scene) -> SE3:
-    """Tool pose X_WG at the home keyframe."""
-    kin = ArmKinematics(scene)
-    kin.update(scene.q_home)
-    return kin.X_WG()
+@dataclass(frozen=True)
+class BuildRequest:
+    """What a scenario's builder gets.
+
+    Attributes:
+        scene: The loaded scene.
+        scenario: Scenario name.
+        seed: Seed of randomised scenarios.
+        brick: Brick start pose override, or None.
+        controller: The run's controller (the planner's pre-flight runs it).
+    """
+
+    scene: Scene
+    scenario: str
+    seed: int
+    brick: BrickPlacement | None = None
+    controller: str = "qp"
+
+
+def target_placement(scene: Scene) -> BrickPlacement:
+    """Bin 2's floor centre, yaw 0: where the pick-and-place scenarios put the brick."""
+    c = scene.target_bin.center_W
+    return BrickPlacement(float(c[0]), float(c[1]), 0.0)
 
 
 def pick_place_task(
-    scene: Scene,
-    name: str,
-    seed: int,
+    req: BuildRequest,
     placement: BrickPlacement,
     goal: BrickPlacement | None = None,
-    plan: PlanConfig | None = None,
     fault_list: Sequence[Fault] = (),
+    preflight: bool = True,
+    planner: PickPlacePlanner | None = None,
 ) -> Task:
-    """Plan a pick from ``placement`` in bin 1 and a place at ``goal`` (default: bin 2 centre)."""
-    plan = plan or PlanConfig()
-    src, dst = scene.source_bin, scene.target_bin
-    X_WO_pick = brick_on_floor(scene, placement, src.floor_top_z)
-    if goal is None:
-        c = dst.center_W
-        goal = BrickPlacement(float(c[0]), float(c[1]), 0.0)
-    X_WO_place = brick_on_floor(scene, goal, dst.floor_top_z)
-    clearance_z = max(src.wall_top_z, dst.wall_top_z) + CLEARANCE_ABOVE_WALLS
+    """Plan a pick from ``placement`` in bin 1 and a place at ``goal`` (default: bin 2 centre).
+
+    With ``preflight`` the planner's candidates are pre-flighted and the first feasible one is
+    the task's plan (the task records them all; none feasible: the run ends before any
+    physics). Without it, the first candidate is executed unchecked.
+    """
+    scene = req.scene
+    X_WO_pick = brick_on_floor(scene, placement, scene.source_bin.floor_top_z)
+    X_WO_place = brick_on_floor(
+        scene, goal or target_placement(scene), scene.target_bin.floor_top_z
+    )
+    planner = planner or PickPlacePlanner(scene, req.controller)
+    report = planner.plan(X_WO_pick, X_WO_place) if preflight else None
     return Task(
-        scenario=name,
-        seed=seed,
-        goal=PlaceGoal(X_WO_place, dst),
-        plan=plan_pick_place(
-            home_tool_pose(scene),
-            X_WO_pick,
-            X_WO_place,
-            clearance_z,
-            plan,
-            p_W_base=scene.p_W_base,
-        ),
+        scenario=req.scenario,
+        seed=req.seed,
+        goal=PlaceGoal(X_WO_place, scene.target_bin),
+        plan=report.plan if report else planner.make_plan(X_WO_pick, X_WO_place),
         X_WO_start=X_WO_pick,
         faults=tuple(fault_list),
+        planning=report,
     )
 
 
-def singular_reach_task(scene: Scene, name: str, seed: int, plan: PlanConfig | None = None) -> Task:
+def singular_reach_task(req: BuildRequest, plan: PlanConfig | None = None) -> Task:
     """A straight radial line that pulls the tool past full stretch and back (seed 000).
 
     The line runs along +y (away from both bins) at a height of 0.30 m with the tool pointing
@@ -141,6 +140,7 @@ def singular_reach_task(scene: Scene, name: str, seed: int, plan: PlanConfig | N
     kinematics: the wrist centre (joint 6) sits above the tool by the flange-to-tool length
     and can be at most upper arm + forearm (0.42 + 0.40 m) from the shoulder (joint 2).
     """
+    scene = req.scene
     plan = plan or PlanConfig()
     kin = ArmKinematics(scene)
     kin.update(scene.q_home)
@@ -175,8 +175,8 @@ def singular_reach_task(scene: Scene, name: str, seed: int, plan: PlanConfig | N
     keyframes = time_keyframes(waypoints, plan)
     X_WO = brick_on_floor(scene, nominal_placement(scene), scene.source_bin.floor_top_z)
     return Task(
-        scenario=name,
-        seed=seed,
+        scenario=req.scenario,
+        seed=req.seed,
         goal=ReachGoal(),
         plan=Plan(PoseTrajectory(keyframes, plan.profile)),
         X_WO_start=X_WO,
@@ -184,12 +184,23 @@ def singular_reach_task(scene: Scene, name: str, seed: int, plan: PlanConfig | N
 
 
 def random_placement(scene: Scene, rng: np.random.Generator) -> BrickPlacement:
-    """Uniform x, y over bin 1's floor, ``RANDOM_WALL_MARGIN`` inside the walls; any yaw."""
+    """A yaw uniform in [-π, π), then x, y uniform over the part of bin 1's floor where the
+    brick's footprint at that yaw lies inside the inner walls."""
     bin_ = scene.source_bin
-    half = bin_.inner_half_extents - RANDOM_WALL_MARGIN
+    yaw = float(rng.uniform(-math.pi, math.pi))
+    yaw_B = yaw - yaw_of_bin(bin_.X_WB)
+    hx, hy = scene.brick_half_extents[:2]
+    c, s = abs(math.cos(yaw_B)), abs(math.sin(yaw_B))
+    half = bin_.inner_half_extents - np.array([c * hx + s * hy, s * hx + c * hy])
     u = rng.uniform(-half, half)
     p_W = bin_.X_WB.apply(np.array([u[0], u[1], 0.0]))
-    return BrickPlacement(float(p_W[0]), float(p_W[1]), float(rng.uniform(-math.pi, math.pi)))
+    return BrickPlacement(float(p_W[0]), float(p_W[1]), yaw)
+
+
+def yaw_of_bin(X_WB: SE3) -> float:
+    """Rotation of a bin's frame about world z [rad]."""
+    R = X_WB.rotation().as_matrix()
+    return math.atan2(float(R[1, 0]), float(R[0, 0]))
 
 
 def nominal_placement(scene: Scene) -> BrickPlacement:
@@ -198,7 +209,7 @@ def nominal_placement(scene: Scene) -> BrickPlacement:
     return BrickPlacement(float(c[0]), float(c[1]), 0.0)
 
 
-Builder = Callable[[Scene, str, int, "BrickPlacement | None"], Task]
+Builder = Callable[[BuildRequest], Task]
 
 
 @dataclass(frozen=True)
@@ -208,7 +219,7 @@ class Scenario:
     Attributes:
         name: Registry key.
         summary: One line shown by ``pickplace scenarios``.
-        build: Builds the task from scene, name, seed and an optional brick placement.
+        build: Builds the task (see :class:`BuildRequest`).
         expected: ``"success"`` or the failure reason the scenario is designed to produce
             with the default controller (``qp``).
         expected_with: Documented outcomes with other controllers, where they differ or are
@@ -230,32 +241,44 @@ class Scenario:
         return {"qp": self.expected, **self.expected_with}
 
 
-def _nominal(scene: Scene, name: str, seed: int, p: BrickPlacement | None) -> Task:
-    return pick_place_task(scene, name, seed, p or nominal_placement(scene))
+def _nominal(req: BuildRequest) -> Task:
+    return pick_place_task(req, req.brick or nominal_placement(req.scene))
 
 
-def _random(scene: Scene, name: str, seed: int, p: BrickPlacement | None) -> Task:
-    placement = p or random_placement(scene, np.random.default_rng(seed))
-    return pick_place_task(scene, name, seed, placement)
+def _random(req: BuildRequest) -> Task:
+    """A brick pose drawn from the seed, drawn again (same generator) until the planner finds
+    a feasible plan, so the scenario always has one; a given ``--brick`` is planned as is."""
+    if req.brick is not None:
+        return pick_place_task(req, req.brick)
+    rng = np.random.default_rng(req.seed)
+    planner = PickPlacePlanner(req.scene, req.controller)
+    for _ in range(MAX_RANDOM_DRAWS):
+        task = pick_place_task(req, random_placement(req.scene, rng), planner=planner)
+        if task.planning is not None and task.planning.feasible:
+            return task
+    raise PlanError(
+        f"no feasible brick pose in bin 1 after {MAX_RANDOM_DRAWS} draws from seed {req.seed}"
+    )
 
 
-def _reach(scene: Scene, name: str, seed: int, p: BrickPlacement | None) -> Task:
-    return singular_reach_task(scene, name, seed)
+def _reach(req: BuildRequest) -> Task:
+    return singular_reach_task(req)
 
 
 def _with_fault(fault: Callable[[Scene], Fault]) -> Builder:
-    def build(scene: Scene, name: str, seed: int, p: BrickPlacement | None) -> Task:
-        return pick_place_task(
-            scene, name, seed, p or nominal_placement(scene), fault_list=[fault(scene)]
-        )
+    def build(req: BuildRequest) -> Task:
+        placement = req.brick or nominal_placement(req.scene)
+        return pick_place_task(req, placement, fault_list=[fault(req.scene)])
 
     return build
 
 
-def _unreachable(scene: Scene, name: str, seed: int, p: BrickPlacement | None) -> Task:
-    # A place target 1.6 m out along +x: well beyond the arm's 1.3 m reach.
+def _unreachable(req: BuildRequest) -> Task:
+    # A place target 1.6 m out along +x: well beyond the arm's 1.3 m reach; executed without
+    # the pre-flight, which would refuse it (``pickplace plan --scenario fault-unreachable``).
     goal = BrickPlacement(1.6, 0.0, 0.0)
-    return pick_place_task(scene, name, seed, p or nominal_placement(scene), goal=goal)
+    placement = req.brick or nominal_placement(req.scene)
+    return pick_place_task(req, placement, goal=goal, preflight=False)
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -266,7 +289,8 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "pick-place-random",
-            "brick x, y, yaw drawn from the seed over bin 1's floor",
+            "brick x, y, yaw drawn from the seed over bin 1's floor (drawn again until the "
+            "planner finds a feasible plan)",
             _random,
             random=True,
         ),
@@ -304,7 +328,8 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "fault-unreachable",
-            "place target 1.6 m away, outside the arm's reach -> ik-failed",
+            "place target 1.6 m away, outside the arm's reach, executed without the "
+            "pre-flight -> ik-failed",
             _unreachable,
             expected="ik-failed",
         ),
@@ -313,6 +338,12 @@ SCENARIOS: dict[str, Scenario] = {
             "a NaN is injected into the brick's velocity mid-run -> nan",
             _with_fault(faults.InjectNaN),
             expected="nan",
+        ),
+        Scenario(
+            "fault-obstacle",
+            "after planning, a box appears in the transfer path -> collision",
+            _with_fault(faults.Obstacle),
+            expected="collision",
         ),
     )
 }
@@ -333,6 +364,7 @@ def get_scenario(name: str) -> Scenario:
 __all__ = [
     "SCENARIOS",
     "BrickPlacement",
+    "BuildRequest",
     "Scenario",
     "check_brick_in_source_bin",
     "get_scenario",

@@ -60,6 +60,10 @@ ROBOT_CONTYPE = 2
 # Contact sensor fields the loop reads (bits of sensor_intprm[0]).
 _CONTACT_FOUND = 1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)
 _CONTACT_FORCE = 1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE)
+# sensor_intprm[1] of a contact sensor that keeps the contact with the largest force.
+_REDUCE_MAXFORCE = 2
+# Names of the robot-world contact sensors load_scene adds, one per world body.
+ROBOT_WORLD_SENSOR_PREFIX = "robot_world/"
 
 
 def names_of(model: mujoco.MjModel, obj: mujoco.mjtObj) -> list[str]:
@@ -99,6 +103,23 @@ class SceneNames:
     source_bin: str = "bin1"
     target_bin: str = "bin2"
     home_key: str = "home"
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact (or a near contact within the geoms' margins) between two geoms.
+
+    Attributes:
+        geom: The robot's (or the held object's) geom.
+        other: The geom it touches.
+        dist: Signed distance [m]: negative when they penetrate.
+        pos_W: Contact point in world [m].
+    """
+
+    geom: int
+    other: int
+    dist: float
+    pos_W: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -191,6 +212,7 @@ class Scene:
         v_max: Joint speed limits [rad/s], from the model's custom numeric data.
         arm_actuator_ids: Position actuators of the arm joints.
         gripper_actuator_id: Position actuator of the finger gap [m].
+        finger_joint_ids: The two finger joints (slides; gap = sum of their positions).
         finger_qpos_adr: qpos addresses of the two finger joints (gap = sum) [m].
         gripper_max_gap: Largest commandable finger gap [m].
         gripper_force_limit: Actuator force bound = squeeze per jaw [N].
@@ -213,6 +235,14 @@ class Scene:
         target_bin: Bin the brick must end in.
         home_key_id: Keyframe with the arm's home posture.
         p_W_base: Point on the first arm joint's (vertical) axis, in world [m].
+        robot_root_body_id: The body under the world whose subtree is the robot (arm and
+            gripper).
+        robot_body_mask: Per body, True for the robot's bodies.
+        world_contact_body_ids: Bodies outside the robot and the brick that can collide: the
+            world the robot must not touch.
+        robot_world_sensor_adr: sensordata addresses of the robot-world contact sensors, one
+            per world contact body, each [found, f_normal, f_t1, f_t2] of the contact with
+            the largest force (force on the robot in the contact frame [N]).
         q_home: Arm joint positions of the home keyframe [rad].
     """
 
@@ -227,6 +257,7 @@ class Scene:
     v_max: np.ndarray
     arm_actuator_ids: np.ndarray
     gripper_actuator_id: int
+    finger_joint_ids: np.ndarray
     finger_qpos_adr: np.ndarray
     gripper_max_gap: float
     gripper_force_limit: float
@@ -246,6 +277,10 @@ class Scene:
     target_bin: BinGeometry
     home_key_id: int
     p_W_base: np.ndarray
+    robot_root_body_id: int
+    robot_body_mask: np.ndarray = field(repr=False)
+    world_contact_body_ids: np.ndarray
+    robot_world_sensor_adr: np.ndarray
     q_home: np.ndarray = field(repr=False)
 
     @cached_property
@@ -285,8 +320,39 @@ class Scene:
         return 2.0 * float(self.brick_half_extents[1])
 
     def is_robot_geom(self, geom_id: int) -> bool:
-        """True if geom ``geom_id`` belongs to the robot (carries :data:`ROBOT_CONTYPE`)."""
-        return bool(self.model.geom_contype[geom_id] & ROBOT_CONTYPE)
+        """True if geom ``geom_id`` belongs to a body of the robot (arm or gripper)."""
+        return bool(self.robot_body_mask[self.model.geom_bodyid[geom_id]])
+
+    def is_world_geom(self, geom_id: int) -> bool:
+        """True if geom ``geom_id`` is part of the world the robot must not touch (a geom of
+        :attr:`world_contact_body_ids`)."""
+        return bool(np.isin(self.model.geom_bodyid[geom_id], self.world_contact_body_ids))
+
+    def robot_world_contacts(self, model: mujoco.MjModel, data: mujoco.MjData) -> list[Contact]:
+        """Contacts in ``data`` between a robot geom and a world geom, deepest first.
+
+        ``model`` and ``data`` may be this scene's or a kinematic copy of it (same geoms),
+        after :func:`mujoco.mj_collision` (contacts within the geoms' margins are included,
+        with their positive distance).
+        """
+        out = []
+        bodies = model.geom_bodyid
+        world = set(self.world_contact_body_ids.tolist())
+        for i in range(data.ncon):
+            c = data.contact[i]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            if self.robot_body_mask[bodies[g1]] and bodies[g2] in world:
+                robot, other = g1, g2
+            elif self.robot_body_mask[bodies[g2]] and bodies[g1] in world:
+                robot, other = g2, g1
+            else:
+                continue
+            out.append(Contact(robot, other, float(c.dist), np.array(c.pos)))
+        return sorted(out, key=lambda c: c.dist)
+
+    def geom_name(self, geom_id: int) -> str:
+        """Name of geom ``geom_id`` (``geom<id>`` when it has none)."""
+        return mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, geom_id) or f"geom{geom_id}"
 
     @property
     def arm_joint_names(self) -> tuple[str, ...]:
@@ -297,6 +363,13 @@ class Scene:
         """Finger gap [m] (sum of the two finger joints) from qpos of shape (..., nq)."""
         a, b = self.finger_qpos_adr
         return np.asarray(qpos[..., a] + qpos[..., b])
+
+    def finger_qpos(self, width: float) -> np.ndarray:
+        """Finger joint positions [m] that open the gap to ``width`` [m] (each finger takes half
+        of it, within its range): the values for :attr:`finger_qpos_adr`."""
+        half = 0.5 * float(width)
+        lo, hi = self.model.jnt_range[self.finger_joint_ids].T
+        return np.clip(np.full(len(self.finger_joint_ids), half), lo, hi)
 
     def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
         """The pad sensors' contact slots from sensordata of shape (..., nsensordata).
@@ -377,18 +450,71 @@ def _pad_force_sensors(
     return (adr[0], adr[1]), slots[0]
 
 
-def compile_scene(path: Path) -> mujoco.MjModel:
-    """Compile an MJCF file, turning every failure into a :class:`SceneError`."""
+def parse_scene(path: Path) -> mujoco.MjSpec:
+    """Parse an MJCF file into a spec, turning every failure into a :class:`SceneError`."""
     path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
     if not path.exists():
         raise SceneError(f"scene file '{path}' does not exist")
     if not path.is_file():
         raise SceneError(f"scene path '{path}' is not a file")
     try:
-        return mujoco.MjModel.from_xml_path(str(path))
-    except ValueError as exc:  # MuJoCo reports parse and compile errors as ValueError.
+        return mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
         detail = " ".join(str(exc).split())
         raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
+
+
+def _compile(spec: mujoco.MjSpec, path: Path) -> mujoco.MjModel:
+    try:
+        return spec.compile()
+    except ValueError as exc:  # MuJoCo reports compile errors as ValueError.
+        detail = " ".join(str(exc).split())
+        raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
+
+
+def compile_scene(path: Path) -> mujoco.MjModel:
+    """Compile an MJCF file, turning every failure into a :class:`SceneError`."""
+    return _compile(parse_scene(path), path.resolve())
+
+
+def _robot_root(model: mujoco.MjModel, joint_id: int) -> int:
+    """The body under the world whose subtree holds joint ``joint_id`` (the robot's root)."""
+    return int(model.body_rootid[model.jnt_bodyid[joint_id]])
+
+
+def _world_contact_bodies(model: mujoco.MjModel, robot_root: int, brick_body: int) -> list[int]:
+    """Bodies outside the robot and the brick that have geoms: the world the robot must not
+    touch (the world body's floor, the bins, an obstacle a fault may bring in)."""
+    out = []
+    for b in range(model.nbody):
+        if (b and model.body_rootid[b] == robot_root) or b == brick_body:
+            continue
+        if np.any(model.geom_bodyid == b):
+            out.append(b)
+    return out
+
+
+def _add_robot_world_sensors(
+    spec: mujoco.MjSpec, model: mujoco.MjModel, robot_root: int, bodies: list[int]
+) -> list[str]:
+    """One contact sensor per world body: the robot's subtree against that body, reporting
+    the number of contacts and the largest normal force (``found force``, ``maxforce``)."""
+    names = []
+    root = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, robot_root)
+    for b in bodies:
+        body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or "world"
+        name = f"{ROBOT_WORLD_SENSOR_PREFIX}{body}"
+        spec.add_sensor(
+            name=name,
+            type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=mujoco.mjtObj.mjOBJ_XBODY,  # subtree of the robot's root
+            objname=root,
+            reftype=mujoco.mjtObj.mjOBJ_BODY,
+            refname=body,
+            intprm=[_CONTACT_FOUND | _CONTACT_FORCE, _REDUCE_MAXFORCE, 1],
+        )
+        names.append(name)
+    return names
 
 
 def load_scene(path: str | Path | None = None, names: SceneNames | None = None) -> Scene:
@@ -404,7 +530,8 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
     """
     path = (Path(path) if path is not None else DEFAULT_SCENE).resolve()
     names = names or SceneNames()
-    model = compile_scene(path)
+    spec = parse_scene(path)
+    model = _compile(spec, path)
     obj = mujoco.mjtObj
 
     joint_ids = np.array([name_to_id(model, obj.mjOBJ_JOINT, j) for j in names.arm_joints])
@@ -436,7 +563,15 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
     if model.geom_type[brick_geom] != mujoco.mjtGeom.mjGEOM_BOX:
         raise SceneError(f"brick geom '{names.brick_geom}' must be a box")
     home = name_to_id(model, obj.mjOBJ_KEY, names.home_key)
+    robot_root = _robot_root(model, int(joint_ids[0]))
+    world_bodies = _world_contact_bodies(model, robot_root, brick_body)
+    sensor_names = _add_robot_world_sensors(spec, model, robot_root, world_bodies)
+    model = _compile(spec, path)  # the same model, with the robot-world contact sensors
     sensor_adr, slots = _pad_force_sensors(model, names, pad_ids, brick_geom)
+    world_sensor_adr = np.array(
+        [model.sensor_adr[name_to_id(model, obj.mjOBJ_SENSOR, n)] for n in sensor_names],
+        dtype=int,
+    )
 
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, home)
@@ -454,6 +589,7 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         v_max=v_max,
         arm_actuator_ids=act_ids,
         gripper_actuator_id=grip_id,
+        finger_joint_ids=np.array(finger_ids, dtype=int),
         finger_qpos_adr=model.jnt_qposadr[finger_ids].copy(),
         gripper_max_gap=float(model.actuator_ctrlrange[grip_id, 1]),
         gripper_force_limit=float(model.actuator_forcerange[grip_id, 1]),
@@ -473,5 +609,9 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         target_bin=_bin_geometry(model, data, names.target_bin),
         home_key_id=home,
         p_W_base=data.xanchor[joint_ids[0]].copy(),
+        robot_root_body_id=robot_root,
+        robot_body_mask=np.asarray(model.body_rootid == robot_root) & (np.arange(model.nbody) > 0),
+        world_contact_body_ids=np.array(world_bodies, dtype=int),
+        robot_world_sensor_adr=world_sensor_adr,
         q_home=data.qpos[qpos_adr].copy(),
     )

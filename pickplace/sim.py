@@ -40,6 +40,7 @@ from pickplace.controllers import IK_STATUSES, DiffIKController, IKStatus
 from pickplace.errors import ControllerError, InvalidInputError, require_positive
 from pickplace.events import Event
 from pickplace.plan import Plan
+from pickplace.planner import PlanningReport
 from pickplace.scene import Scene
 from pickplace.task import Task
 from pickplace.ticklog import CONTROLLER_NONFINITE, FINITE, STATE_NONFINITE, TickLog
@@ -185,8 +186,8 @@ class Simulation:
         self._next_keyframe = 0
         self._slots_warned = False
         self._time_expected = float(self.data.time)
-        context = CheckContext(scene, task.plan, self.criteria, self.dt, self.emit)
-        self.checks: list[Check] = task.goal.checks(context)
+        self.context = CheckContext(scene, task.plan, self.criteria, self.dt, self.emit)
+        self.checks: list[Check] = task.goal.checks(self.context)
 
     @property
     def plan(self) -> Plan:
@@ -229,8 +230,12 @@ class Simulation:
             obs.on_start(self)
         wall0 = time.perf_counter()
         interrupted = False
+        planning = self.task.planning
         try:
-            self.advance(self.max_ticks)
+            if planning is not None:
+                self._planning_events(planning)
+            if planning is None or planning.feasible:
+                self.advance(self.max_ticks)
         except KeyboardInterrupt:
             interrupted = True
             # Complete the rows already simulated (idempotent), without judging them.
@@ -250,6 +255,36 @@ class Simulation:
         for obs in self.observers:
             obs.on_finish(self, result)
         return result
+
+    def _planning_events(self, planning: PlanningReport) -> None:
+        """Events at tick 0 for each candidate the planner rejected and for the one chosen;
+        if none is feasible, the failure ``no-feasible-plan`` (the run then takes no step)."""
+        for c in planning.candidates:
+            if c.preflight.problem is not None:
+                p = c.preflight.problem
+                self.emit(
+                    "plan",
+                    f"plan candidate '{c.label}' rejected: at t={p.t:.2f} s {p.text}",
+                    level="warn",
+                    tick=0,
+                )
+        if planning.chosen is None:
+            self.fail(
+                FailureReason.NO_FEASIBLE_PLAN,
+                f"none of the {len(planning.candidates)} candidate plans is feasible",
+                tick=0,
+            )
+            return
+        chosen = planning.candidates[planning.chosen]
+        m = chosen.preflight
+        self.emit(
+            "plan",
+            f"plan '{chosen.label}' chosen (candidate {planning.chosen + 1} of "
+            f"{len(planning.candidates)}): min clearance {m.min_clearance * 1000:.1f} mm, "
+            f"min joint margin {m.min_joint_margin:.3f} rad, peak speed ratio "
+            f"{m.peak_speed_ratio:.2f}, σmin {m.min_singular_value:.3f}",
+            tick=0,
+        )
 
     def advance(self, ticks: int) -> None:
         """Simulate up to ``ticks`` more control ticks, fewer if the run ends, and assess them.
@@ -434,7 +469,7 @@ class Simulation:
     def _result(self, wall: float) -> RunResult:
         goal = self.task.goal
         if self.failure is None and self.ticks > 0:
-            final = goal.final_failure(self.scene, self.data, self.criteria, self.ticks)
+            final = goal.final_failure(self.context, self.data, self.ticks)
             if final is not None:
                 self.fail(final.reason, final.text, tick=final.tick)
         success = self.failure is None and self.ticks > 0
@@ -459,6 +494,10 @@ class Simulation:
             target_xyz=[float(x) for x in X_WO_goal.translation()] if X_WO_goal else [],
             events=self._sorted_events(),
             metrics=run_metrics(self.log, self.ticks, X_WO, X_WO_goal),
+            plan=None if self.task.planning is None else self.task.planning.as_dict(),
+            planning_time_s=(
+                None if self.task.planning is None else self.task.planning.planning_time_s
+            ),
         )
 
 

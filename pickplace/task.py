@@ -14,6 +14,7 @@ from mink.lie import SE3
 
 from pickplace.goals import Goal
 from pickplace.plan import Plan
+from pickplace.planner import PlanningReport
 from pickplace.trajectory import PoseTrajectory
 
 
@@ -64,6 +65,9 @@ class Task:
         plan: The plan to execute (trajectory and phases).
         X_WO_start: Brick pose at the start (the plan's belief about the world).
         faults: Disturbances injected during the run.
+        planning: The candidates the planner pre-flighted and the one chosen (``plan`` is
+            that one); None for a plan executed without a pre-flight. When no candidate is
+            feasible the run ends before any physics (failure ``no-feasible-plan``).
     """
 
     scenario: str
@@ -72,6 +76,7 @@ class Task:
     plan: Plan
     X_WO_start: SE3
     faults: Sequence[Fault] = ()
+    planning: PlanningReport | None = None
 
     @property
     def trajectory(self) -> PoseTrajectory:

@@ -76,12 +76,15 @@ class TickLog:
         self.position_error = np.zeros(n)
         self.orientation_error = np.zeros(n)
         self.command_error = np.zeros(n)  # planned vs commanded tool position [m]
+        self.robot_world_contacts = np.zeros(n, dtype=np.int32)  # robot-world contact count
+        self.robot_world_force = np.zeros(n)  # largest robot-world normal force [N]
         self.speed_ratio = np.zeros(n)  # max over joints of |q̇_cmd| / q̇_max
         self.limit_violation = np.zeros(n)  # largest distance of q or q_cmd past a limit [rad]
         # ---- filled by the grasp checks
         self.holding_torque = np.zeros((n, 7))
         self.slip = np.full(n, np.nan)
         self._inv_v_max = 1.0 / scene.v_max  # for derive()
+        self._world_sensor_cols = scene.robot_world_sensor_adr[:, None] + np.arange(4)
 
     def derive(self, k0: int, k1: int) -> tuple[int, int] | None:
         """Fill the derived rows ``[k0, k1)`` from the raw ones (idempotent).
@@ -119,6 +122,10 @@ class TickLog:
         self.orientation_error[sl] = quaternion_angle(self.quat_WG_plan[sl], self.quat_WG[sl])
         self.command_error[sl] = np.linalg.norm(self.p_WG_plan[sl] - self.p_WG_cmd[sl], axis=1)
         self.speed_ratio[sl] = (np.abs(self.qdot_cmd[sl]) * self._inv_v_max).max(axis=1)
+        if self._world_sensor_cols.size:
+            world = self.sensordata[sl][:, self._world_sensor_cols]  # (n, bodies, 4)
+            self.robot_world_contacts[sl] = world[..., 0].sum(axis=1)
+            self.robot_world_force[sl] = world[..., 1].max(axis=1)
         q, q_cmd = self.q[sl], self.q_cmd[sl]
         self.limit_violation[sl] = np.maximum.reduce(
             [
@@ -139,3 +146,24 @@ class TickLog:
         if holding.any():
             J = self.J_WG[k0:k1][holding]
             self.holding_torque[k0:k1][holding] = holding_torques(J, mass)
+
+    def restore(self, k: int, data: mujoco.MjData) -> mujoco.MjData:
+        """Put the simulated configuration of tick ``k`` into ``data`` (joint positions and
+        mocap bodies), with forward kinematics and collision detection run on it.
+
+        Args:
+            k: A tick whose raw rows are stored.
+            data: MjData of the scene's model, overwritten.
+
+        Returns:
+            ``data``, whose contacts are those of the configuration at the end of tick ``k``.
+        """
+        model = self.scene.model
+        data.qpos[:] = self.qpos[k]
+        for b in np.flatnonzero(model.body_mocapid >= 0):
+            m = model.body_mocapid[b]
+            data.mocap_pos[m] = self.body_pos[k, b]
+            data.mocap_quat[m] = self.body_quat[k, b]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_collision(model, data)
+        return data

@@ -58,12 +58,14 @@ def placement_problems(
     data: mujoco.MjData,
     bin_: BinGeometry,
     criteria: SuccessCriteria,
+    grasp_width: float,
 ) -> list[str]:
     """Reasons the brick is not verifiably resting in ``bin_`` (empty if it is).
 
     The brick's box corners must lie over the bin's floor inside its inner walls, its lowest
     corner on the floor's top face within ``floor_tolerance``, its z axis within ``max_tilt``
-    of vertical; it must be at rest, free of the gripper, and the gripper open wider than it.
+    of vertical; it must be at rest, free of the gripper, and the gripper open wider than the
+    brick was between its fingers (``grasp_width`` [m]).
     """
     X_WO = brick_pose(scene, data)
     corners_W = transform_points(X_WO, box_corners(scene.brick_half_extents))
@@ -84,7 +86,7 @@ def placement_problems(
     if brick_touches_robot(scene, data):
         problems.append("still touching the gripper")
     gap = float(scene.finger_gap(data.qpos))
-    if gap < scene.brick_width:
+    if gap < grasp_width:
         problems.append(f"gripper not open (gap {gap * 1000:.0f} mm)")
     return problems
 
@@ -118,6 +120,7 @@ def run_metrics(log: TickLog, ticks: int, X_WO_final: SE3, X_WO_goal: SE3 | None
         "max_position_error_m": float(log.position_error[sl].max()) if ticks else 0.0,
         "max_orientation_error_rad": float(log.orientation_error[sl].max()) if ticks else 0.0,
         "max_slip_m": float(slip.max()) if slip.size else None,
+        "max_robot_world_contact_force_n": float(log.robot_world_force[sl].max()) if ticks else 0.0,
         "ik_status_counts": counts,
         "ik_tick_us_median": float(np.median(log.ik_us[sl])) if ticks else None,
     }
@@ -146,6 +149,8 @@ class RunResult:
     target_xyz: list[float]
     events: list[Event]
     metrics: dict[str, Any]
+    plan: dict[str, Any] | None = None
+    planning_time_s: float | None = None
     recording: str | None = None
 
     def summary(self) -> dict[str, Any]:
@@ -169,6 +174,8 @@ class RunResult:
             "ticks": self.ticks,
         }
         out.update(self.metrics)
+        out["planning_time_s"] = self.planning_time_s
+        out["plan"] = self.plan
         out["events"] = [
             {"tick": e.tick, "t": e.t, "level": e.level, "kind": e.kind, "text": e.text}
             for e in self.events
@@ -178,4 +185,9 @@ class RunResult:
 
 
 # Fields that differ between two runs of the same inputs (wall-clock measurements).
-WALL_TIME_FIELDS: tuple[str, ...] = ("wall_time_s", "realtime_factor", "ik_tick_us_median")
+WALL_TIME_FIELDS: tuple[str, ...] = (
+    "wall_time_s",
+    "realtime_factor",
+    "ik_tick_us_median",
+    "planning_time_s",
+)

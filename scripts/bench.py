@@ -1,9 +1,11 @@
 """Benchmark: where a run's time goes, as ratios and medians measured in one process and one run.
 
-Targets (issue 7; figures, not tests):
-- qp IK tick <= 0.5x mink.solve_ik on the identical problem;
-- nominal pick-and-place >= 40x real time headless, >= 30x while recording;
-- sweep throughput with all workers >= 1.8x that with 1 worker (2 cores).
+Targets (figures, not tests):
+- qp IK tick <= 0.5x mink.solve_ik on the identical problem (issue 7);
+- nominal pick-and-place >= 40x real time headless, >= 30x while recording (issue 7);
+- sweep throughput with all workers >= 1.8x that with 1 worker (2 cores) (issue 7);
+- median planning time, all candidates included, <= 25 ms; nominal run >= 55x real time with
+  its planning included (issue 12).
 
 Usage: python scripts/bench.py [--json] [--trials N]
 """
@@ -28,7 +30,9 @@ import numpy as np
 
 from pickplace.controllers import QPController, make_controller
 from pickplace.geometry import pose_error_W
+from pickplace.planner import PickPlacePlanner
 from pickplace.runner import RunRequest, prepare
+from pickplace.scenarios import brick_on_floor, random_placement, target_placement
 from pickplace.scene import load_scene
 from pickplace.sweep import SweepRequest, run_sweep
 
@@ -37,7 +41,12 @@ TARGETS = {
     "realtime_factor_headless": (">=", 40.0),
     "realtime_factor_recording": (">=", 30.0),
     "sweep_speedup_all_workers": (">=", 1.8),
+    "planning_time_ms_median": ("<=", 25.0),
+    "realtime_factor_headless_with_planning": (">=", 55.0),
 }
+
+# Brick poses for the planning-time median: this many seeds of pick-place-random's generator.
+PLANNING_POSES = 40
 
 
 def median_us(fn: Callable[[], object], repeats: int = 2000) -> float:
@@ -104,21 +113,44 @@ def mj_step_us() -> float:
     """One physics step [µs] with the brick held between the pads (from a nominal run)."""
     _, _, sim = prepare(RunRequest())
     phases = sim.plan.phases
-    assert phases is not None
+    if phases is None:
+        raise RuntimeError("the nominal plan has no phases")
     grasp_tick = round(phases.grip_closed / sim.dt)
     sim.advance(grasp_tick + 50)
     return median_us(lambda: mujoco.mj_step(sim.model, sim.data), 3000)
 
 
-def nominal_run(record: Path | None) -> tuple[float, float, Any]:
-    """Wall time [s] and sim time [s] of the nominal run (optionally recording)."""
-    _, _, sim = prepare(RunRequest(record=record))
+def nominal_run(record: Path | None) -> tuple[float, float, float, Any]:
+    """Wall time [s] of the nominal run's physics (optionally recording), its sim time [s] and
+    its planning time [s] (the candidates and their pre-flights, before any physics)."""
+    _, task, sim = prepare(RunRequest(record=record))
     t0 = time.perf_counter()
     result = sim.run()
     wall = time.perf_counter() - t0
     if not result.success:
         raise RuntimeError(f"nominal run failed: {result.failure}")
-    return wall, result.sim_time_s, sim
+    planning = task.planning.planning_time_s if task.planning is not None else 0.0
+    return wall, result.sim_time_s, planning, sim
+
+
+def planning_times() -> dict[str, float]:
+    """Median and p90 time of one planning (all candidates tried, each pre-flighted) over
+    PLANNING_POSES brick poses drawn like pick-place-random's, feasible or not [ms]."""
+    scene = load_scene()
+    planner = PickPlacePlanner(scene, "qp")
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    times, candidates = [], []
+    for seed in range(PLANNING_POSES):
+        p = random_placement(scene, np.random.default_rng(seed))
+        X_pick = brick_on_floor(scene, p, scene.source_bin.floor_top_z)
+        report = planner.plan(X_pick, X_place)
+        times.append(report.planning_time_s * 1e3)
+        candidates.append(len(report.candidates))
+    return {
+        "planning_time_ms_median": statistics.median(times),
+        "planning_time_ms_p90": float(np.percentile(times, 90)),
+        "planning_candidates_mean": float(np.mean(candidates)),
+    }
 
 
 def tick_breakdown() -> dict[str, float]:
@@ -169,13 +201,14 @@ def main(argv: list[str] | None = None) -> int:
     report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
 
     # Headless nominal runs, interleaved with recording runs so that both see the same load.
-    headless, recording, sizes = [], [], []
+    headless, with_planning, recording, sizes = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.repeats):
-            wall, sim_time, sim = nominal_run(None)
+            wall, sim_time, planning, sim = nominal_run(None)
             headless.append(sim_time / wall)
+            with_planning.append(sim_time / (wall + planning))
             rrd = Path(tmp) / f"bench-{i}.rrd"
-            wall, sim_time, _ = nominal_run(rrd)
+            wall, sim_time, _, _ = nominal_run(rrd)
             recording.append(sim_time / wall)
             sizes.append(rrd.stat().st_size / sim_time)
     log = sim.log
@@ -186,6 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     velocities = np.array([plan.sample(log.t[k] - sim.dt)[1] for k in picks])
     states = log.q_cmd[picks - 1]
     report["realtime_factor_headless"] = statistics.median(headless)
+    report["realtime_factor_headless_with_planning"] = statistics.median(with_planning)
     report["realtime_factor_recording"] = statistics.median(recording)
     report["recording_slowdown"] = (
         report["realtime_factor_headless"] / report["realtime_factor_recording"]
@@ -196,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     report.update(ik_ticks(states, targets, velocities))
     report.update(controller_ticks(states[20], targets[20], velocities[20]))
     report["mj_step_us_holding_brick"] = mj_step_us()
+    report.update(planning_times())
     report["physics_share_of_tick"] = report["tick_us_physics"] / report["tick_us_total"]
 
     workers = os.cpu_count() or 1

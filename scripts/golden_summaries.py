@@ -1,9 +1,9 @@
 """Record (or check) the JSON summaries that a behaviour-preserving change must not alter.
 
 The file ``tests/data/golden_summaries.json`` holds one summary per case, without the fields
-that measure wall-clock time (``WALL_TIME_FIELDS``). ``tests/test_golden.py`` re-runs every case
-and compares. A change that alters behaviour on purpose (a new plan, new timing, a new robot)
-regenerates the file deliberately with
+that measure wall-clock time (``pickplace.verdict.WALL_TIME_FIELDS``). ``tests/test_golden.py``
+re-runs every case and compares. A change that alters behaviour on purpose (a new plan, new
+timing, a new robot) regenerates the file deliberately with
 
     python scripts/golden_summaries.py --write
 
@@ -25,10 +25,9 @@ from typing import Any
 
 from pickplace.runner import RunRequest, run
 from pickplace.scenarios import SCENARIOS
+from pickplace.verdict import WALL_TIME_FIELDS
 
 PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "golden_summaries.json"
-# Summary fields that measure the wall clock, not the simulation.
-WALL_CLOCK_FIELDS = ("wall_time_s", "realtime_factor", "ik_tick_us_median")
 
 
 def cases() -> list[dict[str, Any]]:
@@ -49,7 +48,7 @@ def cases() -> list[dict[str, Any]]:
 def summary_of(case: dict[str, Any]) -> dict[str, Any]:
     """The case's summary without its wall-clock fields."""
     summary = run(RunRequest(**case)).summary()
-    for key in WALL_CLOCK_FIELDS:
+    for key in WALL_TIME_FIELDS:
         summary.pop(key, None)
     return summary
 

@@ -18,7 +18,7 @@ from pickplace.checks import FailureReason
 from pickplace.controllers import make_controller
 from pickplace.errors import InvalidInputError, RecordingError
 from pickplace.recording import Recorder
-from pickplace.scenarios import get_scenario
+from pickplace.scenarios import BuildRequest, get_scenario
 from pickplace.scene import Scene, load_scene
 from pickplace.sim import RunResult, Simulation
 
@@ -75,7 +75,7 @@ def read_entities(path: Path) -> dict[str, Entity]:
 
 def run_recorded(path: Path, *, stop_at: int | None = None) -> tuple[RunResult, Scene]:
     scene = load_scene()
-    task = get_scenario("pick-place").build(scene, "pick-place", 0, None)
+    task = get_scenario("pick-place").build(BuildRequest(scene, "pick-place", 0))
     if stop_at is not None:
         task = dataclasses.replace(task, faults=[_CtrlC(stop_at)])
     controller = make_controller("qp", scene, 0.01)
@@ -156,7 +156,7 @@ def test_plan_is_recorded(recording: Recording) -> None:
     names = [
         kf.name
         for kf in get_scenario("pick-place")
-        .build(recording.scene, "pick-place", 0, None)
+        .build(BuildRequest(recording.scene, "pick-place", 0))
         .trajectory.keyframes
     ]
     shown = []

@@ -1,0 +1,154 @@
+"""The kinematic pre-flight against what it claims to predict: the loop's commanded path, MuJoCo's
+distances, and the physics of runs it passes or refuses (issue 12)."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from pickplace.planner import PickPlacePlanner
+from pickplace.preflight import Preflight, PreflightConfig, collision_model
+from pickplace.runner import RunRequest, prepare
+from pickplace.scenarios import BrickPlacement, brick_on_floor, target_placement
+from pickplace.scene import Scene
+
+
+def _bin1(scene: Scene, x_B: float, y_B: float, yaw: float) -> BrickPlacement:
+    """A brick pose given in bin 1's frame (x, y from its floor centre [m]), yaw [rad]."""
+    p = scene.source_bin.X_WB.apply(np.array([x_B, y_B, 0.0]))
+    return BrickPlacement(float(p[0]), float(p[1]), yaw)
+
+
+def _poses(scene: Scene, placement: BrickPlacement):  # type: ignore[no-untyped-def]
+    X_pick = brick_on_floor(scene, placement, scene.source_bin.floor_top_z)
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    return X_pick, X_place
+
+
+def test_at_the_control_rate_it_predicts_the_commanded_joint_path_exactly() -> None:
+    """The IK integrates q_cmd open loop and never reads the physics: the pre-flight's joint
+    path at the loop's rate is the run's commanded path, bit for bit."""
+    _, task, sim = prepare(RunRequest())
+    preflight = Preflight(sim.scene, "qp", PreflightConfig(rate_hz=1.0 / sim.dt))
+    result = preflight.run(task.plan, task.X_WO_start, task.goal.X_WO_goal, stop_at_problem=False)
+    sim.advance(400)
+    n = 400
+    # Row k of the pre-flight is the q the IK starts tick k from; the log's q_cmd[k] is the q
+    # after tick k's step, i.e. the pre-flight's row k + 1.
+    np.testing.assert_array_equal(result.q[1 : n + 1], sim.log.q_cmd[:n])
+
+
+def test_a_nominal_plan_is_feasible_with_stated_margins(scene: Scene) -> None:
+    _, task, _ = prepare(RunRequest())
+    cfg = PreflightConfig()
+    r = Preflight(scene, "qp").run(task.plan, task.X_WO_start, task.goal.X_WO_goal)
+    assert r.feasible, r.problem
+    assert r.t_checked == pytest.approx(math.floor(task.trajectory.end_time * cfg.rate_hz) / 20)
+    assert cfg.clearance <= r.min_clearance <= cfg.detection_distance
+    assert r.min_joint_margin >= cfg.joint_margin
+    assert 0.0 < r.peak_speed_ratio <= 1.0
+    assert r.min_singular_value >= cfg.min_singular_value
+
+
+def test_clearance_is_mujocos_distance_between_the_named_geoms(scene: Scene) -> None:
+    """The reported problem names two geoms; MuJoCo's own mj_geomDistance between them, at the
+    problem's configuration, is the reported clearance."""
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick, X_place = _poses(scene, _bin1(scene, 0.0, -0.09, 0.0))  # 60 mm from the far wall
+    report = planner.plan(X_pick, X_place, first_feasible=False)
+    first = report.candidates[0]
+    problem = first.preflight.problem
+    assert problem is not None and problem.kind == "collision"
+    robot_geom, rest = problem.text.split(" comes within ")
+    world_geom = rest.split(" of ")[1].split(" (")[0]
+    clearance_mm = float(rest.split(" mm")[0])
+    # Rebuild the configuration at the problem's time from the pre-flight's joint path.
+    m = collision_model(scene, 0.1)
+    d = mujoco.MjData(m)
+    d.qpos[scene.arm_qpos_adr] = first.preflight.q[-1]
+    width = first.plan.trajectory.sample(problem.t)[2]
+    d.qpos[scene.finger_qpos_adr] = scene.finger_qpos(width)
+    scene.set_brick_pose(d, X_pick)
+    mujoco.mj_kinematics(m, d)
+    g1, g2 = m.geom(robot_geom).id, m.geom(world_geom).id
+    dist = mujoco.mj_geomDistance(m, d, g1, g2, 0.1, None)
+    assert dist * 1000 == pytest.approx(clearance_mm, abs=0.06)
+    assert dist < PreflightConfig().clearance
+    assert scene.is_robot_geom(g1) and scene.is_world_geom(g2)
+
+
+def test_a_palm_over_a_wall_is_refused_and_the_run_would_have_hit_it(scene: Scene) -> None:
+    """The class-W failure: 60 mm from the far wall, the palm comes down on its top. The
+    pre-flight says collision; the same plan executed anyway touches the wall."""
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick, X_place = _poses(scene, _bin1(scene, 0.0, -0.09, 0.0))
+    first = planner.plan(X_pick, X_place).candidates[0]
+    assert first.preflight.problem is not None
+    assert first.preflight.problem.kind == "collision"
+    assert "bin1_wall" in first.preflight.problem.text
+    _, task, sim = prepare(RunRequest())
+    task = type(task)(task.scenario, 0, task.goal, first.plan, X_pick, faults=(), planning=None)
+    from pickplace.controllers import make_controller
+    from pickplace.sim import Simulation
+
+    result = Simulation(sim.scene, task, make_controller("qp", sim.scene, sim.dt)).run()
+    assert result.failure is not None and result.failure.value == "collision"
+
+
+def test_the_held_brick_is_checked_and_its_supports_are_not(scene: Scene) -> None:
+    """Resting on bin 1's floor at the start and bin 2's at the goal is no problem; a held brick
+    2 mm from a wall is, and the pair named is the brick and that wall."""
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick, X_place = _poses(scene, _bin1(scene, 0.0, 0.0, 0.0))
+    assert planner.plan(X_pick, X_place).feasible
+    pf = planner.preflight
+    kinds = pf._pair_kinds(X_pick, X_place)
+    brick = scene.brick_geom_id
+    for floor in ("bin1_floor", "bin2_floor"):
+        assert kinds[brick, scene.model.geom(floor).id] == 0  # it rests there
+    wall = scene.model.geom("bin1_wall_px").id
+    assert kinds[brick, wall] == 2
+    # The brick held 2 mm from bin 1's +x wall, the arm at home: the brick is the problem.
+    half = scene.source_bin.inner_half_extents
+    near = _bin1(scene, float(half[0]) - 0.0375 - 0.002, 0.0, 0.0)
+    X_near = brick_on_floor(scene, near, scene.source_bin.floor_top_z + 0.03)
+    clearance, pair = pf._closest(scene.q_home, 0.1, X_near, kinds, held=True)
+    assert pair is not None and pair[:2] == ("brick", "bin1_wall_px")
+    assert clearance == pytest.approx(0.002, abs=1e-6)
+    _, pair_free = pf._closest(scene.q_home, 0.1, X_near, kinds, held=False)
+    assert pair_free is None or pair_free[0] != "brick"
+
+
+def test_a_wrist_wound_into_its_limit_is_refused(scene: Scene) -> None:
+    """The class-Y failure: with the via-point on the shortest arc the wrist turns against the
+    base swing into joint 7's limit; the pre-flight names the joint and the limit."""
+    from pickplace.plan import PlanConfig, plan_pick_place
+
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick, X_place = _poses(scene, _bin1(scene, -0.121, 0.002, -0.212))
+    found = []
+    for _, X_OG in planner.grasps(X_pick):
+        plan = plan_pick_place(
+            planner.X_WG_home,
+            X_pick,
+            X_place,
+            planner.clearance_z,
+            PlanConfig(),
+            p_W_base=scene.p_W_base,
+            X_OG=X_OG,
+            via="shortest",
+        )
+        r = planner.preflight.run(plan, X_pick, X_place)
+        if r.problem is not None:
+            found.append(r.problem)
+    assert any(p.kind in ("joint-limit", "ik") for p in found), found
+    limited = [p for p in found if p.kind == "joint-limit"]
+    assert all(scene.arm_joint_names[-1] in p.text for p in limited)
+
+
+def test_config_is_validated() -> None:
+    with pytest.raises(ValueError, match="pre-flight clearance must be a finite number > 0"):
+        PreflightConfig(clearance=0.0)
