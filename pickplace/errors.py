@@ -32,6 +32,13 @@ class SceneError(PickPlaceError):
     """A scene file is missing, is not valid MJCF, or lacks a required element."""
 
 
+class RobotError(PickPlaceError):
+    """A robot description, or an arm or gripper file it names, is missing or unusable.
+
+    The message is one line naming the file, the field or element, and what would be valid.
+    """
+
+
 class UnknownNameError(PickPlaceError, KeyError):
     """A name (site, joint, scenario, controller, ...) does not exist.
 

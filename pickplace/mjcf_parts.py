@@ -1,0 +1,348 @@
+"""Load an arm or gripper MJCF file as published elsewhere, repairing what can be repaired.
+
+Published robot files are written to be loaded on their own, or by another project's code; put
+into a composed scene they meet these pitfalls (``../shared/notes/robot-models.md``):
+
+* asset paths relative to the file (or to its ``<compiler meshdir/texturedir/assetdir>``), which
+  an attached child resolves against the parent's folder: every asset path is made absolute;
+* ``<include>`` files: inlined, so the file is one document;
+* no ``<compiler angle>``: MuJoCo then reads degrees, and ``attach`` keeps the child's compiler,
+  so a finger range in radians silently shrinks 57-fold. The description's ``angle`` says what
+  such a file means; a file without either is an error;
+* the same asset defined twice: identical definitions are merged, different ones are an error;
+* attributes MuJoCo's schema rejects (e.g. ``group`` on ``<default>``): removed, since MuJoCo
+  could never have read them;
+* ``<option>`` and ``<keyframe>`` (options belong to the scene; key sizes change when parts are
+  composed) and geoms, sites, lights and cameras on the file's worldbody (a floor is not part of
+  a robot): removed.
+
+Every repair is reported in :attr:`Part.repairs`. What cannot be repaired raises
+:class:`~pickplace.errors.RobotError` naming the file and the element.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+
+from pickplace.errors import RobotError
+
+_MESH_DIR_ASSETS = ("mesh", "hfield", "skin")
+"""Asset tags whose files MuJoCo looks for in ``meshdir``."""
+
+_TEXTURE_FILE_ATTRS = (
+    "file",
+    "fileright",
+    "fileleft",
+    "fileup",
+    "filedown",
+    "filefront",
+    "fileback",
+)
+
+_WORLD_ONLY = ("geom", "site", "light", "camera")
+"""Worldbody children that are not parts of a robot."""
+
+_UNRECOGNIZED = re.compile(r"unrecognized attribute: '([^']+)'.*?Element '([^']+)'", re.S)
+_OPENING = re.compile(r"Error opening file '([^']+)'")
+_ELEMENT = re.compile(r"Element name '([^']+)'")
+_MAX_REPAIRS = 50
+
+
+@dataclass(frozen=True)
+class Part:
+    """An arm or gripper file, sanitised into one self-contained MJCF document.
+
+    Attributes:
+        path: The file as named by the description.
+        field: The description field that names it (``[arm] mjcf``), for messages.
+        xml: The sanitised document (absolute asset paths, explicit ``<compiler angle>``).
+        repairs: What was changed, one line each.
+        digest: SHA-256 of the file, its includes and its asset files, and the angle used.
+    """
+
+    path: Path
+    field: str
+    xml: str
+    repairs: tuple[str, ...]
+    digest: str
+
+    def new_spec(self) -> mujoco.MjSpec:
+        """A fresh spec of the sanitised document (specs are mutable; make one per use)."""
+        return mujoco.MjSpec.from_string(self.xml)
+
+    def error(self, problem: str) -> RobotError:
+        """A :class:`RobotError` about this file."""
+        return RobotError(f"{self.path}: {self.field}: {problem}")
+
+
+def _read_xml(path: Path, source: Path, field: str) -> ET.Element:
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        detail = " ".join(str(exc).split())
+        raise RobotError(
+            f"{source}: {field}: '{path}' is not readable XML: {detail}; valid: an MJCF file"
+        ) from exc
+    if root.tag != "mujoco":
+        raise RobotError(
+            f"{source}: {field}: '{path}' has root element <{root.tag}>; valid: <mujoco>"
+        )
+    return root
+
+
+def _inline_includes(
+    root: ET.Element, base: Path, source: Path, field: str, files: list[Path]
+) -> None:
+    """Replace every ``<include file>`` by the children of the included ``<mujoco>``.
+
+    Paths are relative to the main file's folder, as MuJoCo resolves them.
+    """
+    for _ in range(1000):
+        parents = {child: parent for parent in root.iter() for child in parent}
+        include = next((e for e in root.iter("include")), None)
+        if include is None:
+            return
+        name = include.get("file")
+        if not name:
+            raise RobotError(
+                f"{source}: {field}: <include> without a file attribute; valid: "
+                f'<include file="..."/>'
+            )
+        path = Path(name) if Path(name).is_absolute() else base / name
+        if not path.is_file():
+            raise RobotError(
+                f"{source}: {field}: <include file=\"{name}\"> not found at '{path}'; valid: a "
+                f"path relative to '{base}'"
+            )
+        files.append(path)
+        included = _read_xml(path, source, field)
+        parent = parents[include]
+        at = list(parent).index(include)
+        parent.remove(include)
+        for k, child in enumerate(list(included)):
+            parent.insert(at + k, child)
+    raise RobotError(
+        f"{source}: {field}: <include> files include each other without end; valid: no cycles"
+    )
+
+
+def _asset_dirs(root: ET.Element, base: Path) -> tuple[Path, Path, bool]:
+    """Mesh and texture folders of a document, and whether ``strippath`` is on."""
+    meshdir = texturedir = assetdir = None
+    strip = False
+    for compiler in root.iter("compiler"):
+        meshdir = compiler.get("meshdir", meshdir)
+        texturedir = compiler.get("texturedir", texturedir)
+        assetdir = compiler.get("assetdir", assetdir)
+        strip = compiler.get("strippath", "false" if not strip else "true") == "true"
+    mesh = meshdir if meshdir is not None else assetdir
+    tex = texturedir if texturedir is not None else assetdir
+    return (base / mesh if mesh else base), (base / tex if tex else base), strip
+
+
+def _resolve_assets(
+    root: ET.Element, base: Path, source: Path, field: str, files: list[Path]
+) -> list[str]:
+    repairs: list[str] = []
+    resolved = 0
+    mesh_dir, tex_dir, strip = _asset_dirs(root, base)
+    for compiler in root.iter("compiler"):
+        for attr in ("meshdir", "texturedir", "assetdir", "strippath"):
+            compiler.attrib.pop(attr, None)
+    for element in root.iter():
+        attrs: tuple[str, ...]
+        if element.tag == "model":
+            attrs, folder = ("file",), base
+        elif element.tag in _MESH_DIR_ASSETS:
+            attrs, folder = ("file",), mesh_dir
+        elif element.tag == "texture":
+            attrs, folder = _TEXTURE_FILE_ATTRS, tex_dir
+        else:
+            continue
+        for attr in attrs:
+            name = element.get(attr)
+            if not name:
+                continue
+            rel = Path(Path(name).name if strip else name)
+            path = rel if rel.is_absolute() else (folder / rel).resolve()
+            what = f"{element.tag} '{element.get('name', rel.stem)}'"
+            if not path.is_file():
+                raise RobotError(
+                    f"{source}: {field}: {what} does not load: file '{path}' does not exist; "
+                    f"valid: a path relative to the MJCF file's folder (or its compiler's "
+                    f"meshdir/texturedir/assetdir)"
+                )
+            files.append(path)
+            if str(path) != name:
+                element.set(attr, str(path))
+                resolved += 1
+    if resolved:
+        repairs.append(f"{resolved} asset paths made absolute (against '{base}')")
+    return repairs
+
+
+def _merge_repeated_assets(root: ET.Element, source: Path, field: str) -> list[str]:
+    repairs: list[str] = []
+    for asset in root.iter("asset"):
+        seen: dict[tuple[str, str], ET.Element] = {}
+        for element in list(asset):
+            name = element.get("name") or (
+                Path(element.get("file", "")).stem if element.get("file") else None
+            )
+            if not name:
+                continue
+            key = (element.tag, name)
+            if key not in seen:
+                seen[key] = element
+                continue
+            if seen[key].attrib == element.attrib and len(element) == 0:
+                asset.remove(element)
+                repairs.append(f"{element.tag} '{name}' defined twice identically: merged")
+            else:
+                raise RobotError(
+                    f"{source}: {field}: {element.tag} '{name}' is defined twice with different "
+                    f"attributes; valid: one definition per name"
+                )
+    return repairs
+
+
+def _set_angle(root: ET.Element, angle: str | None, source: Path, field: str) -> str:
+    authored = [c.get("angle") for c in root.iter("compiler") if c.get("angle")]
+    file_angle = authored[-1] if authored else None
+    if file_angle is None and angle is None:
+        raise RobotError(
+            f"{source}: {field}: the file has no <compiler angle>, so its angles' units are "
+            f'unknown; valid: add angle = "radian" or "degree" to this table'
+        )
+    if file_angle is not None and angle is not None and file_angle != angle:
+        raise RobotError(
+            f'{source}: {field.replace("mjcf", "angle")}: "{angle}" contradicts the file\'s '
+            f'<compiler angle="{file_angle}">; valid: remove the field, or "{file_angle}"'
+        )
+    used = file_angle if file_angle is not None else str(angle)
+    compilers = list(root.iter("compiler"))
+    if not compilers:
+        compiler = ET.Element("compiler")
+        root.insert(0, compiler)
+        compilers = [compiler]
+    for compiler in compilers:
+        compiler.set("angle", used)
+    return used
+
+
+def _strip_scene_parts(root: ET.Element) -> list[str]:
+    repairs: list[str] = []
+    for tag in ("option", "keyframe"):
+        for element in list(root.findall(tag)):
+            root.remove(element)
+            repairs.append(f"<{tag}> removed (it belongs to the scene)")
+    for world in root.findall("worldbody"):
+        for element in list(world):
+            if element.tag in _WORLD_ONLY:
+                world.remove(element)
+                label = element.get("name", "unnamed")
+                repairs.append(f"worldbody {element.tag} '{label}' removed (not part of a robot)")
+    return repairs
+
+
+def _parse_with_repairs(
+    root: ET.Element, source: Path, field: str
+) -> tuple[str, mujoco.MjSpec, list[str]]:
+    repairs: list[str] = []
+    for _ in range(_MAX_REPAIRS):
+        xml = ET.tostring(root, encoding="unicode")
+        try:
+            return xml, mujoco.MjSpec.from_string(xml), repairs
+        except ValueError as exc:
+            message = str(exc)
+            match = _UNRECOGNIZED.search(message)
+            if match is None:
+                detail = " ".join(re.sub(r",? ?line \d+", "", message).split())
+                raise RobotError(
+                    f"{source}: {field}: MuJoCo cannot load it: {detail}; valid: a file that "
+                    f"MuJoCo loads on its own"
+                ) from exc
+            attr, tag = match.groups()
+            removed = 0
+            for element in root.iter(tag):
+                if attr in element.attrib:
+                    del element.attrib[attr]
+                    removed += 1
+            if removed == 0:
+                raise RobotError(
+                    f"{source}: {field}: MuJoCo rejects attribute '{attr}' on <{tag}>; valid: "
+                    f"attributes of MuJoCo's schema"
+                ) from exc
+            repairs.append(f"attribute '{attr}' on <{tag}> removed ({removed}x): MuJoCo rejects it")
+    raise RobotError(
+        f"{source}: {field}: more than {_MAX_REPAIRS} rejected attributes; valid: an MJCF file "
+        f"for MuJoCo {mujoco.__version__}"
+    )
+
+
+def _check_compiles(spec: mujoco.MjSpec, source: Path, field: str) -> None:
+    try:
+        spec.compile()
+    except ValueError as exc:
+        message = " ".join(re.sub(r",? ?line \d+", "", str(exc)).split())
+        opening = _OPENING.search(message)
+        element = _ELEMENT.search(message)
+        for mesh in spec.meshes:
+            named = element is not None and element.group(1) == mesh.name
+            opened = opening is not None and Path(opening.group(1)).name == Path(mesh.file).name
+            if named or opened:
+                raise RobotError(
+                    f"{source}: {field}: mesh '{mesh.name}' (file '{mesh.file}') does not load: "
+                    f"{message}; valid: a mesh file MuJoCo reads (STL, OBJ or MSH)"
+                ) from exc
+        raise RobotError(
+            f"{source}: {field}: MuJoCo cannot compile it: {message}; valid: a file that "
+            f"compiles in MuJoCo on its own"
+        ) from exc
+
+
+def load_part(path: Path, field: str, angle: str | None, source: Path | None = None) -> Part:
+    """Read an arm or gripper file and sanitise it into a self-contained document.
+
+    Args:
+        path: The MJCF file.
+        field: The description field naming it (``[arm] mjcf``), for messages.
+        angle: Units of its angles if the file has no ``<compiler angle>`` (or None).
+        source: The description file, named in messages (default: ``path`` itself).
+
+    Raises:
+        RobotError: The file is missing, not MuJoCo XML, has no known angle units, an
+            asset does not exist or does not load, or MuJoCo rejects it for a reason that is
+            not repairable.
+    """
+    path = path.resolve()
+    src = source or path
+    if not path.is_file():
+        raise RobotError(f"{src}: {field}: file '{path}' does not exist; valid: an MJCF file")
+    files = [path]
+    root = _read_xml(path, src, field)
+    base = path.parent
+    _inline_includes(root, base, src, field, files)
+    used_angle = _set_angle(root, angle, src, field)
+    repairs = _strip_scene_parts(root)
+    repairs += _resolve_assets(root, base, src, field, files)
+    repairs += _merge_repeated_assets(root, src, field)
+    xml, spec, more = _parse_with_repairs(root, src, field)
+    repairs += more
+    _check_compiles(spec, src, field)
+    digest = hashlib.sha256(used_angle.encode())
+    for f in files:  # contents only: the same files elsewhere share a calibration
+        digest.update(f.read_bytes())
+    return Part(
+        path=path,
+        field=field,
+        xml=xml,
+        repairs=tuple(repairs),
+        digest=digest.hexdigest(),
+    )
