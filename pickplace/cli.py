@@ -90,6 +90,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer")
     run.add_argument("--control-rate", type=_finite_float, default=100.0, help="IK rate [Hz]")
     run.add_argument("--pace", type=_finite_float, help="run at most this many times real time")
+    run.add_argument(
+        "--speed",
+        type=_finite_float,
+        default=1.0,
+        help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
+    )
     run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     plan = sub.add_parser(
@@ -102,6 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
     plan.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
     plan.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
+    plan.add_argument(
+        "--speed",
+        type=_finite_float,
+        default=1.0,
+        help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
+    )
     plan.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     sub.add_parser("scenarios", help="list the scenarios").add_argument(
@@ -134,6 +146,7 @@ OPTION_OF_FIELD = {
     "connect": "--connect",
     "control_rate_hz": "--control-rate",
     "pace": "--pace",
+    "speed": "--speed",
 }
 
 
@@ -226,6 +239,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         connect=args.connect,
         control_rate_hz=args.control_rate,
         pace=args.pace,
+        speed=args.speed,
         observers=[_ProgressObserver(progress)] if progress is not None else [],
     )
     result = run(req)
@@ -248,6 +262,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         seed=args.seed,
         brick=args.brick,
         scene_path=args.scene,
+        speed=args.speed,
     )
     report = plan_report(req)
     out = {

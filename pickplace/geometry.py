@@ -112,6 +112,28 @@ def quaternion_angle(quat_a: npt.ArrayLike, quat_b: npt.ArrayLike) -> FloatArray
     return np.asarray(2.0 * np.arctan2(np.sqrt(vx * vx + vy * vy + vz * vz), np.abs(w)))
 
 
+def quaternion_step_W(quat: npt.ArrayLike, omega_W: npt.ArrayLike, dt: float) -> FloatArray:
+    """Orientations (..., 4) wxyz turned for ``dt`` [s] at world-frame angular velocities
+    ``omega_W`` (..., 3) [rad/s]: exp(ω dt) ⊗ q, vectorised."""
+    q = np.asarray(quat, dtype=np.float64)
+    w = np.asarray(omega_W, dtype=np.float64)
+    speed = np.linalg.norm(w, axis=-1)
+    half = 0.5 * speed * dt
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(speed > 0.0, np.sin(half) / np.where(speed > 0.0, speed, 1.0), 0.0)
+    ew, ex, ey, ez = np.cos(half), k * w[..., 0], k * w[..., 1], k * w[..., 2]
+    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            ew * qw - ex * qx - ey * qy - ez * qz,
+            ew * qx + ex * qw + ey * qz - ez * qy,
+            ew * qy + ey * qw + ez * qx - ex * qz,
+            ew * qz + ez * qw + ex * qy - ey * qx,
+        ],
+        axis=-1,
+    )
+
+
 # ---------------------------------------------------------------------------- slerp
 
 

@@ -34,12 +34,22 @@ class PlanConfig:
         approach_distance: Offset of pre-pick, pre-place and retreat from the grasp, backwards
             along the approach axis (G's -z, world up for a top grasp) [m].
         lift_height: Height the brick is lifted straight up after closing [m].
-        close_time: Duration of closing the gripper, at rest [s].
-        open_time: Duration of opening the gripper, at rest [s].
+        close_time: Duration of closing the gripper, at rest [s]. The command ramps from open
+            to closed over it; measured on the WSG-50-like gripper, a step command squeezes the
+            brick with 95 % of the grip force within 12 ms and the gap is steady after 38 ms,
+            and under the ramp full force comes at 70 % of the ramp: 0.15 s leaves 45 ms of
+            steady grip before lifting.
+        open_time: Duration of opening the gripper, at rest [s]: under the ramp the pads leave
+            the brick halfway and clear it by 5 mm a side at 60 % (measured: 98 % open 28 ms
+            after a step).
         settle_time: Rest at the pick pose before closing [s]; 0 omits the "settle" keyframe.
+            The arm arrives within 3 mm of the pick pose (measured at full speed) and settles
+            in about 50 ms.
         open_width: Commanded finger gap when open [m].
         closed_width: Commanded finger gap when closed [m]; the brick stops the fingers.
         min_segment_duration: Lower bound of every segment duration [s].
+        time_quantum: When > 0, every segment duration is rounded up to a whole number of
+            these [s] (the pre-flight's path sweep puts its ticks on the keyframes with it).
         profile: Motion profile name: "sine", "minimum-jerk" or "linear" (tests only).
     """
 
@@ -49,12 +59,13 @@ class PlanConfig:
     max_angular_accel: float = 2.0
     approach_distance: float = 0.10
     lift_height: float = 0.15
-    close_time: float = 0.6
-    open_time: float = 0.5
-    settle_time: float = 0.2
+    close_time: float = 0.15
+    open_time: float = 0.1
+    settle_time: float = 0.05
     open_width: float = 0.10
     closed_width: float = 0.0
     min_segment_duration: float = 0.05
+    time_quantum: float = 0.0
     profile: str = "sine"
 
     def __post_init__(self) -> None:
@@ -63,7 +74,7 @@ class PlanConfig:
             if f.name == "profile":
                 continue
             value = getattr(self, f.name)
-            if f.name in ("settle_time", "closed_width"):
+            if f.name in ("settle_time", "closed_width", "time_quantum"):
                 checked = require_non_negative(f.name, value, PlanError)
             else:
                 checked = require_positive(f.name, value, PlanError)
@@ -189,7 +200,8 @@ def time_keyframes(
     """Give waypoints times: the first at 0 s, each next one a segment duration later.
 
     The segment ending at waypoint ``k`` lasts
-    ``max(segment_duration(X_{k-1}, X_k, config), waypoints[k].min_duration)``.
+    ``max(segment_duration(X_{k-1}, X_k, config), waypoints[k].min_duration)``, rounded up to
+    whole ``config.time_quantum`` when that is set.
 
     Raises:
         PlanError: Fewer than 2 waypoints or an invalid waypoint.
@@ -198,8 +210,12 @@ def time_keyframes(
         raise PlanError(f"waypoints must contain at least 2 entries, got {len(waypoints)}")
     t = 0.0
     keyframes = [Keyframe(waypoints[0].name, t, waypoints[0].X_WG, waypoints[0].gripper_width)]
+    quantum = config.time_quantum
     for prev, w in itertools.pairwise(waypoints):
-        t += max(segment_duration(prev.X_WG, w.X_WG, config), w.min_duration)
+        duration = max(segment_duration(prev.X_WG, w.X_WG, config), w.min_duration)
+        if quantum > 0.0:
+            duration = math.ceil(duration / quantum - 1e-9) * quantum
+        t += duration
         keyframes.append(Keyframe(w.name, t, w.X_WG, w.gripper_width))
     return keyframes
 

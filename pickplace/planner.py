@@ -21,10 +21,11 @@ wrist case. If none is feasible the report says so, with each candidate's first 
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from mink.lie import SE3, SO3
@@ -34,10 +35,15 @@ from pickplace.kinematics import ArmKinematics
 from pickplace.plan import Plan, PlanConfig, plan_pick_place, swung_pose
 from pickplace.preflight import Preflight, PreflightConfig, PreflightResult
 from pickplace.scene import Scene
+from pickplace.timing import SegmentLimits, TimingConfig, retime
 
 # Clearance of the via-point above the higher bin wall: brick height hanging below the tool
 # (0.025 m half-height) plus 0.1 m of air [m].
 CLEARANCE_ABOVE_WALLS = 0.125
+# The path sweep's spacing: at most this much tool travel [m] or turn [rad] between two
+# pre-flight ticks (for the collision checks and the joint path the timing works on).
+PATH_SPACING = 0.01
+PATH_ANGLE = 0.05
 
 
 @dataclass(frozen=True)
@@ -144,10 +150,30 @@ class PickPlacePlanner:
         controller: str,
         config: PlanConfig | None = None,
         preflight: PreflightConfig | None = None,
+        timing: TimingConfig | None = None,
     ) -> None:
         self.scene = scene
         self.config = config or PlanConfig()
+        self.timing = timing or TimingConfig()
         self.preflight = Preflight(scene, controller, preflight)
+        dt = self.preflight.dt
+        # The path sweep: the same waypoints at constant speed, a pre-flight tick every
+        # PATH_SPACING of tool travel (or PATH_ANGLE of turn), every keyframe on a tick.
+        self.sweep_config = replace(
+            self.config,
+            profile="linear",
+            max_linear_speed=PATH_SPACING / dt,
+            max_angular_speed=PATH_ANGLE / dt,
+            settle_time=dt if self.config.settle_time > 0 else 0.0,
+            close_time=dt,
+            open_time=dt,
+            min_segment_duration=2 * dt,
+            time_quantum=dt,
+        )
+        pad = scene.pad_geom_ids[0]
+        mu = float(scene.model.geom_friction[pad, 0])  # the pads have contact priority
+        # |a − g| the pads' friction holds on the brick: μ · 2 pads · grip force / mass.
+        self.slip_accel = mu * 2.0 * scene.gripper_force_limit / scene.brick_mass
         kin = ArmKinematics(scene)
         kin.update(scene.q_home)
         self.X_WG_home = kin.X_WG()
@@ -166,8 +192,7 @@ class PickPlacePlanner:
         tried: list[Candidate] = []
         chosen: int | None = None
         for label, X_OG in self.grasps(X_WO_pick):
-            plan = self.make_plan(X_WO_pick, X_WO_place, X_OG)
-            result = self.preflight.run(plan, X_WO_pick, X_WO_place)
+            plan, result = self.timed_plan(X_WO_pick, X_WO_place, X_OG)
             tried.append(Candidate(label, plan, result))
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
@@ -175,14 +200,51 @@ class PickPlacePlanner:
                     break
         return PlanningReport(tuple(tried), chosen, time.perf_counter() - t0, self.preflight.config)
 
-    def make_plan(self, X_WO_pick: SE3, X_WO_place: SE3, X_OG: SE3 | None = None) -> Plan:
-        """The pick-and-place plan with grasp ``X_OG`` (default: the nearest-yaw grasp)."""
+    def timed_plan(
+        self, X_WO_pick: SE3, X_WO_place: SE3, X_OG: SE3
+    ) -> tuple[Plan, PreflightResult]:
+        """One candidate: the path swept by the pre-flight, then (if it passes) timed by the
+        robot's limits and pre-flighted again as timed.
+
+        Returns:
+            The timed plan and its pre-flight; or, when the path sweep fails, the swept plan
+            and the sweep's result (its first problem is on the path, whatever the timing).
+        """
+        path = self.make_plan(X_WO_pick, X_WO_place, X_OG, self.sweep_config)
+        swept = self.preflight.run(path, X_WO_pick, X_WO_place)
+        if not swept.feasible:
+            return path, swept
+        holds = [
+            b.t - a.t
+            for a, b in itertools.pairwise(
+                self.make_plan(X_WO_pick, X_WO_place, X_OG).trajectory.keyframes
+            )
+        ]
+        timing = self.timing
+
+        def limits(carried: bool) -> SegmentLimits:
+            return timing.limits(
+                self.scene.v_max, self.scene.a_max, self.slip_accel if carried else None
+            )
+
+        timed = retime(path, swept.times, swept.q, holds, limits)
+        return timed, self.preflight.run(timed, X_WO_pick, X_WO_place)
+
+    def make_plan(
+        self,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        X_OG: SE3 | None = None,
+        config: PlanConfig | None = None,
+    ) -> Plan:
+        """The pick-and-place plan with grasp ``X_OG`` (default: the nearest-yaw grasp), timed
+        by Cartesian limits (``config``, default the planner's)."""
         return plan_pick_place(
             self.X_WG_home,
             X_WO_pick,
             X_WO_place,
             self.clearance_z,
-            self.config,
+            config or self.config,
             p_W_base=self.scene.p_W_base,
             X_OG=X_OG,
         )

@@ -66,6 +66,11 @@ class PreflightConfig:
             fraction (the QP's solver tolerance) [-].
         min_singular_value: Smallest σ of the tool Jacobian: a tenth of the nominal
             pick-and-place's 0.22; below it the arm is near a singularity.
+        midpoint_feedforward: Give the controller the plan's velocity at the middle of each
+            pre-flight tick instead of its start. The loop integrates at its control rate, where
+            the difference is negligible; at the pre-flight's coarser rate the start's velocity
+            leaves a lag of ½ a dt² (6 mm at 5 m/s² and 20 Hz) that the loop does not have, the
+            midpoint's only O(dt³). False reproduces the loop exactly when both run at one rate.
     """
 
     rate_hz: float = 20.0
@@ -75,6 +80,7 @@ class PreflightConfig:
     tracking_tolerance: float = 0.01
     speed_ratio_tolerance: float = 1e-6
     min_singular_value: float = 0.02
+    midpoint_feedforward: bool = True
 
     def __post_init__(self) -> None:
         """Validate every field (all must be finite numbers > 0)."""
@@ -208,12 +214,15 @@ class Preflight:
             v_lim=sc.v_max * (1.0 + cfg.speed_ratio_tolerance),
             tracking_sq=cfg.tracking_tolerance**2,
         )
+        midpoint, half_dt = cfg.midpoint_feedforward, 0.5 * dt
         q = sc.q_home.copy()
         found: Problem | None = None  # the first IK, joint, speed or collision problem
         end = n
         for i in range(n):
             t = float(times[i])
             x, V, width = sample(t)
+            if midpoint:
+                V = sample(t + half_dt)[1]
             res = command(q, x, V)
             q_path[i], qdot_path[i], J_path[i] = q, res.qdot, res.J_WG
             is_held = held is not None and held[0] <= t < held[1]

@@ -462,6 +462,22 @@ PLOTS: tuple[Plot, ...] = (
         names=_joint_names,
         values=lambda log, sl: log.holding_torque[sl],
     ),
+    # The plan's timing: the planned tool speed [m/s] and the plan segment being executed
+    # (index of the keyframe it starts from; the event log names the keyframes reached).
+    Plot(
+        path="plots/plan/tool_speed",
+        tab="Timing",
+        title="Planned tool speed [m/s]",
+        names=("planned tool speed [m/s]",),
+        values=lambda log, sl: np.linalg.norm(log.V_WG_plan[sl, :3], axis=1),
+    ),
+    Plot(
+        path="plots/plan/segment",
+        tab="Timing",
+        title="Plan segment",
+        names=("segment (index of its first keyframe)",),
+        values=lambda log, sl: log.plan_segment[sl],
+    ),
     # Finger gap commanded and measured [m]; normal force on the brick per pad [N].
     Plot(
         path="plots/gripper/width",

@@ -26,6 +26,7 @@ from pickplace.scenarios import (
 from pickplace.scene import Scene, load_scene
 from pickplace.sim import SimConfig, Simulation, TickObserver
 from pickplace.task import Task
+from pickplace.timing import TimingConfig
 from pickplace.verdict import RunResult
 
 CONTROL_RATE_RANGE_HZ = (100.0, 1000.0)
@@ -48,6 +49,8 @@ class RunRequest:
         connect: Stream to a running Rerun viewer at this URL.
         control_rate_hz: IK rate [Hz].
         pace: Run at most this many times faster than real time (None: as fast as possible).
+        speed: Speed override in (0, 1]: the planner scales every speed limit by it and every
+            acceleration limit by its square.
     """
 
     scenario: str = "pick-place"
@@ -60,6 +63,7 @@ class RunRequest:
     connect: str | None = None
     control_rate_hz: float = 100.0
     pace: float | None = None
+    speed: float = 1.0
     observers: Sequence[TickObserver] = field(default=(), compare=False)
 
     @property
@@ -143,7 +147,14 @@ def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, 
     if req.brick is not None:
         check_brick_in_source_bin(scene, req.brick)
     task = scenario.build(
-        BuildRequest(scene, scenario.name, req.seed, req.brick, controller=req.controller)
+        BuildRequest(
+            scene,
+            scenario.name,
+            req.seed,
+            req.brick,
+            controller=req.controller,
+            timing=TimingConfig(speed=req.speed),
+        )
     )
     planning = task.planning
     infeasible = planning is not None and not planning.feasible

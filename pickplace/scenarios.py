@@ -27,6 +27,7 @@ from pickplace.plan import Plan, PlanConfig, Waypoint, time_keyframes
 from pickplace.planner import PickPlacePlanner
 from pickplace.scene import Scene
 from pickplace.task import Fault, Task
+from pickplace.timing import TimingConfig
 from pickplace.trajectory import PoseTrajectory
 
 # Most brick poses pick-place-random draws before it gives up finding a feasible one.
@@ -85,6 +86,7 @@ class BuildRequest:
         seed: Seed of randomised scenarios.
         brick: Brick start pose override, or None.
         controller: The run's controller (the planner's pre-flight runs it).
+        timing: How the planner times plans by the robot (``--speed`` is its ``speed``).
     """
 
     scene: Scene
@@ -92,6 +94,11 @@ class BuildRequest:
     seed: int
     brick: BrickPlacement | None = None
     controller: str = "qp"
+    timing: TimingConfig = field(default_factory=TimingConfig)
+
+    def planner(self) -> PickPlacePlanner:
+        """A planner for this request's scene, controller and timing."""
+        return PickPlacePlanner(self.scene, self.controller, timing=self.timing)
 
 
 def target_placement(scene: Scene) -> BrickPlacement:
@@ -119,7 +126,7 @@ def pick_place_task(
     X_WO_place = brick_on_floor(
         scene, goal or target_placement(scene), scene.target_bin.floor_top_z
     )
-    planner = planner or PickPlacePlanner(scene, req.controller)
+    planner = planner or req.planner()
     report = planner.plan(X_WO_pick, X_WO_place) if preflight else None
     return Task(
         scenario=req.scenario,
@@ -251,7 +258,7 @@ def _random(req: BuildRequest) -> Task:
     if req.brick is not None:
         return pick_place_task(req, req.brick)
     rng = np.random.default_rng(req.seed)
-    planner = PickPlacePlanner(req.scene, req.controller)
+    planner = req.planner()
     for _ in range(MAX_RANDOM_DRAWS):
         task = pick_place_task(req, random_placement(req.scene, rng), planner=planner)
         if task.planning is not None and task.planning.feasible:

@@ -92,6 +92,7 @@ class SceneNames:
     arm_joints: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
     arm_actuators: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
     speed_limits: str = "arm_joint_speed_limits"
+    accel_limits: str = "arm_joint_accel_limits"
     gripper_actuator: str = "wsg50/fingers"
     finger_joints: tuple[str, str] = ("wsg50/left_finger", "wsg50/right_finger")
     pad_geoms: tuple[str, str] = ("wsg50/left_pad", "wsg50/right_pad")
@@ -210,6 +211,8 @@ class Scene:
         q_min: Lower joint limits [rad].
         q_max: Upper joint limits [rad].
         v_max: Joint speed limits [rad/s], from the model's custom numeric data.
+        a_max: Joint acceleration limits [rad/s²], from the model's custom numeric data, or
+            None when the scene gives none.
         arm_actuator_ids: Position actuators of the arm joints.
         gripper_actuator_id: Position actuator of the finger gap [m].
         finger_joint_ids: The two finger joints (slides; gap = sum of their positions).
@@ -255,6 +258,7 @@ class Scene:
     q_min: np.ndarray
     q_max: np.ndarray
     v_max: np.ndarray
+    a_max: np.ndarray | None
     arm_actuator_ids: np.ndarray
     gripper_actuator_id: int
     finger_joint_ids: np.ndarray
@@ -549,6 +553,17 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
             f"speed limits [rad/s], got {v_max.tolist()}"
         )
 
+    a_max = None
+    acc_id = mujoco.mj_name2id(model, obj.mjOBJ_NUMERIC, names.accel_limits)
+    if acc_id >= 0:
+        adr, size = model.numeric_adr[acc_id], model.numeric_size[acc_id]
+        a_max = np.array(model.numeric_data[adr : adr + size], dtype=float)
+        if a_max.shape != (len(joint_ids),) or np.any(a_max <= 0):
+            raise SceneError(
+                f"custom numeric '{names.accel_limits}' must hold {len(joint_ids)} positive "
+                f"joint acceleration limits [rad/s²], got {a_max.tolist()}"
+            )
+
     grip_id = name_to_id(model, obj.mjOBJ_ACTUATOR, names.gripper_actuator)
     finger_ids = [name_to_id(model, obj.mjOBJ_JOINT, j) for j in names.finger_joints]
     pad_ids = (
@@ -587,6 +602,7 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         q_min=model.jnt_range[joint_ids, 0].copy(),
         q_max=model.jnt_range[joint_ids, 1].copy(),
         v_max=v_max,
+        a_max=a_max,
         arm_actuator_ids=act_ids,
         gripper_actuator_id=grip_id,
         finger_joint_ids=np.array(finger_ids, dtype=int),

@@ -26,6 +26,7 @@ geometry stated in :class:`~pickplace.verdict.SuccessCriteria`.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Sequence
@@ -56,11 +57,17 @@ class SimConfig:
             steps of the scene's timestep.
         velocity_feedforward: Send q_cmd + (kv/kp)·q̇_cmd to the position actuators, so that
             their damping term tracks the commanded joint velocity instead of braking it.
+        dynamics_feedforward: Also add τ/kp, the torque of the commanded motion (inertia,
+            Coriolis and centrifugal forces, joint damping and armature: inverse dynamics)
+            per actuator gain, so that the actuators drive the arm along instead of lagging by
+            τ/kp — 16 mm at the tool for the iiwa at full speed and acceleration. q̈_cmd is
+            the change of q̇_cmd over a tick.
         criteria: Success and failure geometry.
     """
 
     control_rate_hz: float = 100.0
     velocity_feedforward: bool = True
+    dynamics_feedforward: bool = True
     criteria: SuccessCriteria = field(default_factory=SuccessCriteria)
 
     def __post_init__(self) -> None:
@@ -161,6 +168,8 @@ class Simulation:
         kp = self.model.actuator_gainprm[act, 0]
         kv = -self.model.actuator_biasprm[act, 2]
         self._ff = kv / kp if self.config.velocity_feedforward else np.zeros(len(act))
+        self._dynamics = _DynamicsFeedforward(scene.arm_model, kp, self.dt)
+        self._use_dynamics = self.config.dynamics_feedforward
         self._zero_qdot = np.zeros(len(act))
         self._arm_ctrl = _as_slice(scene.arm_actuator_ids)
         self._gripper_ctrl = scene.gripper_actuator_id
@@ -344,7 +353,10 @@ class Simulation:
         """
         log, dt, ff = self.log, self.dt, self._ff
         sample, command = self._sample, self._command
+        segment_index = self.task.trajectory.segment_index
+        dynamics = self._dynamics if self._use_dynamics else None
         q_cmd = self.q_cmd
+        qdot_prev = log.qdot_cmd[k0 - 1] if k0 > 0 else self._zero_qdot
         for k in range(k0, k1):
             t = k * dt
             x_plan, V_plan, width = sample(t)
@@ -360,11 +372,17 @@ class Simulation:
                 log.nonfinite[k] = FINITE
             q_cmd = q_cmd + qdot * dt
             log.x_WG_plan[k] = x_plan
+            log.V_WG_plan[k] = V_plan
+            log.plan_segment[k] = segment_index(t)
             log.x_WG_cmd[k] = res.x_WG
             log.J_WG[k] = res.J_WG
             log.q_cmd[k] = q_cmd
             log.qdot_cmd[k] = qdot
-            log.arm_ctrl[k] = q_cmd + ff * qdot
+            if dynamics is None:
+                log.arm_ctrl[k] = q_cmd + ff * qdot
+            else:
+                log.arm_ctrl[k] = q_cmd + ff * qdot + dynamics(q_cmd, qdot, qdot - qdot_prev)
+            qdot_prev = qdot
             log.gripper_cmd[k] = width
             log.ik_status[k] = _STATUS_CODE_BY_ID[id(res.status)]
             if not finite:
@@ -477,6 +495,7 @@ class Simulation:
             self.failure = FailureReason.INTERRUPTED
         X_WO = brick_pose(self.scene, self.data)
         X_WO_goal = goal.X_WO_goal
+        end = self.task.trajectory.end_time
         return RunResult(
             scenario=self.task.scenario,
             controller=self.controller.name,
@@ -493,12 +512,49 @@ class Simulation:
             brick_final_xyz=[float(x) for x in X_WO.translation()],
             target_xyz=[float(x) for x in X_WO_goal.translation()] if X_WO_goal else [],
             events=self._sorted_events(),
-            metrics=run_metrics(self.log, self.ticks, X_WO, X_WO_goal),
+            metrics={
+                **run_metrics(self.log, self.ticks, X_WO, X_WO_goal),
+                "cycle_time_s": end if self.ticks * self.dt >= end - 1e-9 else None,
+            },
             plan=None if self.task.planning is None else self.task.planning.as_dict(),
             planning_time_s=(
                 None if self.task.planning is None else self.task.planning.planning_time_s
             ),
         )
+
+
+class _DynamicsFeedforward:
+    """τ / kp: the actuator setpoint offset that makes a position actuator of gain kp supply
+    the joint torque τ = M(q) q̈ + c(q, q̇) + D q̇ + A q̈ of a commanded motion — inertia,
+    Coriolis and centrifugal forces (MuJoCo's recursive Newton-Euler on the arm-only model,
+    gravity off: the arm's bodies have gravity compensation), joint damping D and armature A.
+
+    The arm-only model keeps the gripper as a rigid body and has no brick.
+    """
+
+    def __init__(self, model: mujoco.MjModel, kp: np.ndarray, dt: float) -> None:
+        self.model = copy.deepcopy(model)
+        self.model.opt.gravity[:] = 0.0
+        self.data = mujoco.MjData(self.model)
+        self.inv_kp = 1.0 / np.asarray(kp, dtype=np.float64)
+        self.inv_dt = 1.0 / dt
+        self.damping = self.model.dof_damping.copy()
+        self.armature = self.model.dof_armature.copy()
+        self.out = np.zeros(self.model.nv)
+
+    def __call__(self, q: np.ndarray, qdot: np.ndarray, dqdot: np.ndarray) -> np.ndarray:
+        """The offset for joints at ``q`` moving at ``qdot`` whose velocity changed by
+        ``dqdot`` over the last tick."""
+        m, d = self.model, self.data
+        qacc = dqdot * self.inv_dt
+        d.qpos[:] = q
+        d.qvel[:] = qdot
+        d.qacc[:] = qacc
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        mujoco.mj_rne(m, d, 1, self.out)
+        return (self.out + self.damping * qdot + self.armature * qacc) * self.inv_kp
 
 
 class _DataViews:

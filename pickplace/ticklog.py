@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 
 from pickplace.diagnostics import holding_torques, jacobian_health_rows
-from pickplace.geometry import quaternion_angle
+from pickplace.geometry import quaternion_angle, quaternion_step_W
 from pickplace.scene import Scene
 
 # Codes of TickLog.nonfinite: what first became non-finite at a tick.
@@ -38,7 +38,9 @@ class TickLog:
         # ---- raw, written by the loop every tick
         self.q_cmd = np.zeros((n, 7))
         self.qdot_cmd = np.zeros((n, 7))
-        self.x_WG_plan = np.zeros((n, 7))  # wxyz_xyz
+        self.x_WG_plan = np.zeros((n, 7))  # wxyz_xyz, at the tick's start
+        self.V_WG_plan = np.zeros((n, 6))  # planned [v; ω] in world at the tick's start
+        self.plan_segment = np.zeros(n, dtype=np.int16)  # index of the segment's first keyframe
         self.x_WG_cmd = np.zeros((n, 7))  # wxyz_xyz: FK of the q the IK used
         self.J_WG = np.zeros((n, 6, 7))  # tool Jacobian [v; ω] at that q
         self.gripper_cmd = np.zeros(n)
@@ -118,8 +120,13 @@ class TickLog:
         self.condition_t[sl] = health.condition_t
         self.manipulability_t[sl] = health.manipulability_t
 
-        self.position_error[sl] = np.linalg.norm(self.p_WG[sl] - self.p_WG_plan[sl], axis=1)
-        self.orientation_error[sl] = quaternion_angle(self.quat_WG_plan[sl], self.quat_WG[sl])
+        # The simulated tool is read at the tick's end, the plan sampled at its start: compare
+        # both at the end, the plan carried one tick along its own velocity (to O(a dt²)).
+        V = self.V_WG_plan[sl]
+        p_plan_end = self.p_WG_plan[sl] + V[:, :3] * self.dt
+        quat_plan_end = quaternion_step_W(self.quat_WG_plan[sl], V[:, 3:], self.dt)
+        self.position_error[sl] = np.linalg.norm(self.p_WG[sl] - p_plan_end, axis=1)
+        self.orientation_error[sl] = quaternion_angle(quat_plan_end, self.quat_WG[sl])
         self.command_error[sl] = np.linalg.norm(self.p_WG_plan[sl] - self.p_WG_cmd[sl], axis=1)
         self.speed_ratio[sl] = (np.abs(self.qdot_cmd[sl]) * self._inv_v_max).max(axis=1)
         if self._world_sensor_cols.size:

@@ -20,7 +20,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Protocol
 
 import mujoco
 import numpy as np
@@ -211,6 +211,7 @@ class _Segment:
     Attributes:
         t0: Start time [s].
         inv_duration: 1 / duration [1/s].
+        law: The segment's time law, or None for the trajectory's profile.
         q0: Orientation at the start (wxyz).
         phi: Rotation vector of the segment in the start frame, log(R0⁻¹ R1) [rad].
         width0: Gripper width at the start [m].
@@ -222,6 +223,7 @@ class _Segment:
 
     t0: float
     inv_duration: float
+    law: TimeLaw | None
     q0: FloatArray
     phi: FloatArray
     width0: float
@@ -231,6 +233,18 @@ class _Segment:
     omega_dir_W_xyz: tuple[float, float, float]
 
 
+class TimeLaw(Protocol):
+    """A segment's path parameter over time: u(t) from 0 to 1 in ``duration``, at rest at both
+    ends (e.g. :class:`pickplace.timing.TabulatedLaw`, the robot's time-optimal timing)."""
+
+    @property
+    def duration(self) -> float:
+        """Time the segment takes [s]."""
+
+    def __call__(self, t: float) -> tuple[float, float]:
+        """(u [-], u̇ [1/s]) at local time ``t`` [s] from the segment's start."""
+
+
 class PoseTrajectory:
     """Gripper pose ``X_WG(t)``, spatial velocity and gripper width through keyframes.
 
@@ -238,21 +252,38 @@ class PoseTrajectory:
     """
 
     def __init__(
-        self, keyframes: Sequence[Keyframe], profile: MotionProfile | str = "sine"
+        self,
+        keyframes: Sequence[Keyframe],
+        profile: MotionProfile | str = "sine",
+        laws: Sequence[TimeLaw | None] | None = None,
     ) -> None:
         """Build the trajectory and precompute per-segment data.
 
         Args:
             keyframes: At least 2 keyframes with strictly increasing times [s].
-            profile: Motion profile, or its name (see ``PROFILES``).
+            profile: Motion profile of the segments without a law, or its name (``PROFILES``).
+            laws: Per segment, a time law that replaces the profile (its duration must be the
+                segment's), or None for the profile.
 
         Raises:
-            PlanError: Invalid keyframes.
+            PlanError: Invalid keyframes, or laws that do not match the segments.
             UnknownNameError: Unknown profile name.
         """
         validate_keyframes(keyframes)
         self._profile = profile_by_name(profile) if isinstance(profile, str) else profile
         self._keyframes = tuple(keyframes)
+        n_segments = len(self._keyframes) - 1
+        self._laws: tuple[TimeLaw | None, ...] = tuple(laws) if laws else (None,) * n_segments
+        if len(self._laws) != n_segments:
+            raise PlanError(
+                f"laws must have one entry per segment ({n_segments}), got {len(self._laws)}"
+            )
+        for i, law in enumerate(self._laws):
+            span = self._keyframes[i + 1].t - self._keyframes[i].t
+            if law is not None and abs(law.duration - span) > 1e-9 * max(1.0, span):
+                raise PlanError(
+                    f"segment {i}'s time law lasts {law.duration!r} s, the segment {span!r} s"
+                )
         self._times = [float(k.t) for k in keyframes]
         self._segments: list[_Segment] = []
         for a, b in itertools.pairwise(self._keyframes):
@@ -265,6 +296,7 @@ class PoseTrajectory:
                 _Segment(
                     t0=float(a.t),
                     inv_duration=1.0 / (float(b.t) - float(a.t)),
+                    law=self._laws[len(self._segments)],
                     q0=np.array(R0.wxyz, dtype=np.float64),
                     phi=phi,
                     width0=float(a.gripper_width),
@@ -279,6 +311,11 @@ class PoseTrajectory:
     def keyframes(self) -> tuple[Keyframe, ...]:
         """The keyframes, in time order."""
         return self._keyframes
+
+    @property
+    def laws(self) -> tuple[TimeLaw | None, ...]:
+        """Per segment, its time law (None: the profile)."""
+        return self._laws
 
     @property
     def profile(self) -> MotionProfile:
@@ -322,8 +359,9 @@ class PoseTrajectory:
         """The plan at time ``t`` [s]: the trajectory's one evaluator.
 
         Position on the straight line ``p_i + s Δp``, orientation ``R_i · exp(s φ_i)`` (MuJoCo's
-        quaternion integration), spatial velocity ``ṡ [Δp; R_i φ_i]`` with ``ṡ = s'(τ) / T_i``,
-        width ``w_i + τ Δw`` (a linear ramp). Times before the first keyframe or after the last
+        quaternion integration), spatial velocity ``ṡ [Δp; R_i φ_i]`` with ``s = s(τ)``,
+        ``ṡ = s'(τ) / T_i`` under the profile, or ``(s, ṡ)`` from the segment's time law; width
+        ``w_i + τ Δw`` (a linear ramp in time). Times before the first keyframe or after the last
         clamp to the ends, where the velocity is zero.
 
         Args:
@@ -342,8 +380,11 @@ class PoseTrajectory:
         if t >= times[-1]:
             x_WG = np.array(self._keyframes[-1].X_WG.wxyz_xyz, dtype=np.float64)
             return x_WG, np.zeros(6, dtype=np.float64), width
-        profile = self._profile
-        s = profile.s(tau)
+        law = seg.law
+        if law is None:
+            s = self._profile.s(tau)
+        else:
+            s, s_dot = law(t - seg.t0)
         quat = seg.q0.copy()
         mujoco.mju_quatIntegrate(quat, seg.phi, s)  # R0 · exp(s φ), φ in R0's frame
         # Plain float math for the 3-vectors (as exact as NumPy's, elementwise).
@@ -352,7 +393,8 @@ class PoseTrajectory:
         x_WG = np.array((*quat.tolist(), p0x + s * dpx, p0y + s * dpy, p0z + s * dpz))
         if t <= times[0]:
             return x_WG, np.zeros(6, dtype=np.float64), width
-        s_dot = profile.ds(tau) * seg.inv_duration
+        if law is None:
+            s_dot = self._profile.ds(tau) * seg.inv_duration
         wx, wy, wz = seg.omega_dir_W_xyz
         V_WG = np.array((s_dot * dpx, s_dot * dpy, s_dot * dpz, s_dot * wx, s_dot * wy, s_dot * wz))
         return x_WG, V_WG, width

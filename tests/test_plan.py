@@ -71,7 +71,7 @@ def test_keyframe_names_times_and_widths() -> None:
 def test_zero_settle_time_omits_the_settle_keyframe() -> None:
     k = plan(PlanConfig(settle_time=0.0))
     assert list(k) == [n for n in NAMES if n != "settle"]
-    assert k["grip-closed"].t - k["pick"].t == pytest.approx(0.6, abs=1e-12)
+    assert k["grip-closed"].t - k["pick"].t == pytest.approx(PlanConfig().close_time, abs=1e-12)
 
 
 def test_keyframe_geometry() -> None:

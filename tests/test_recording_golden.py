@@ -96,6 +96,8 @@ PLOTS: dict[str, Callable[[TickLog, Scene], np.ndarray]] = {
     "plots/ik/tick_us": lambda log, sc: log.ik_us,
     "plots/ik/status": lambda log, sc: log.ik_status,
     "plots/statics/holding_torque": lambda log, sc: log.holding_torque,
+    "plots/plan/tool_speed": lambda log, sc: np.linalg.norm(log.V_WG_plan[:, :3], axis=1),
+    "plots/plan/segment": lambda log, sc: log.plan_segment,
 }
 # The constant lines: one row at the first and one at the last tick.
 LIMIT_LINES: dict[str, Callable[[Scene], list[float]]] = {

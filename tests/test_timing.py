@@ -1,0 +1,176 @@
+"""Time-optimal timing by the robot's limits (issue 13): the TOPP solution against the toppra
+package and against the limits it must respect; plans retimed without changing their path."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from pickplace.errors import InvalidInputError, PlanError
+from pickplace.plan import PlanConfig
+from pickplace.runner import RunRequest, prepare
+from pickplace.timing import (
+    SegmentLimits,
+    TimingConfig,
+    cycle_time_bound,
+    path_derivatives,
+    scaled_law,
+    time_optimal_law,
+)
+
+V_MAX = np.array([1.48, 1.48, 1.75, 1.31, 2.27, 2.36, 2.36])
+A_MAX = np.array([8.57, 8.57, 8.74, 11.36, 12.23, 15.72, 15.72])
+
+
+def _path(seed: int, n: int = 40) -> np.ndarray:
+    """A smooth random joint path sampled at u = k / n."""
+    rng = np.random.default_rng(seed)
+    u = np.linspace(0.0, 1.0, n + 1)[:, None]
+    q0, dq = rng.uniform(-1, 1, 7), rng.uniform(-1.2, 1.2, 7)
+    bend = rng.uniform(-0.3, 0.3, 7)
+    return q0 + u * dq + np.sin(np.pi * u) * bend
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_duration_equals_toppra_on_the_same_path(seed: int) -> None:
+    toppra = pytest.importorskip("toppra")
+    import toppra.algorithm as algo
+    import toppra.constraint as constraint
+
+    q = _path(seed)
+    u = np.linspace(0.0, 1.0, len(q))
+    law = time_optimal_law(q, np.zeros(3), np.zeros(3), SegmentLimits(V_MAX, A_MAX))
+    path = toppra.SplineInterpolator(u, q)
+    instance = algo.TOPPRA(
+        [constraint.JointVelocityConstraint(V_MAX), constraint.JointAccelerationConstraint(A_MAX)],
+        path,
+        gridpoints=u,
+        parametrizer="ParametrizeConstAccel",
+    )
+    reference = instance.compute_trajectory(0, 0)
+    # toppra differentiates a spline through the samples, we the samples: within 1 %.
+    assert law.duration == pytest.approx(reference.duration, rel=0.01)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_law_respects_every_joint_limit_and_rests_at_both_ends(seed: int) -> None:
+    q = _path(seed)
+    law = time_optimal_law(q, np.zeros(3), np.zeros(3), SegmentLimits(V_MAX, A_MAX))
+    dq, ddq = path_derivatives(q)
+    x = np.square(law.u_dot)
+    w = np.asarray(law.u_ddot)
+    speed = np.abs(dq) * np.sqrt(x)[:, None]
+    assert np.all(speed <= V_MAX * (1 + 1e-9))
+    # The acceleration on each interval, at its first grid point (TOPP-RA's discretisation).
+    acc = ddq[:-1] * x[:-1, None] + dq[:-1] * w[:, None]
+    assert np.all(np.abs(acc) <= A_MAX * (1 + 1e-9))
+    assert law(0.0) == (0.0, 0.0) and law(law.duration) == (1.0, 0.0)
+    # Some limit is active at every interval (the law is as fast as allowed, not merely
+    # feasible): the speed, or the acceleration at one end of the interval.
+    tight = (speed / V_MAX).max(axis=1)[:-1] > 0.999
+    tight |= (np.abs(acc) / A_MAX).max(axis=1) > 0.999
+    acc_end = ddq[1:] * x[1:, None] + dq[1:] * w[:, None]
+    tight |= (np.abs(acc_end) / A_MAX).max(axis=1) > 0.999
+    assert tight.mean() > 0.9
+
+
+def test_the_law_is_continuous_and_its_speed_integrates_to_its_position() -> None:
+    law = time_optimal_law(_path(3), np.zeros(3), np.zeros(3), SegmentLimits(V_MAX, A_MAX))
+    t = np.linspace(0.0, law.duration, 4001)
+    u, ud = np.array([law(float(x)) for x in t]).T
+    assert np.all(np.diff(u) >= -1e-12) and u[0] == 0.0 and u[-1] == 1.0
+    # Trapezoid integral of u̇ is u (the law is piecewise quadratic in time).
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (ud[1:] + ud[:-1]) * np.diff(t))])
+    np.testing.assert_allclose(integral, u, atol=2e-4)
+    assert np.max(np.abs(np.diff(u))) < 1e-2  # no jumps
+
+
+def test_speed_only_timing_approaches_the_path_length_bound() -> None:
+    """With (nearly) unlimited acceleration the time is ∫ max_j |q'_j| / v_j du, which is at
+    least each joint's path length over its speed limit."""
+    q = _path(1, n=200)
+    law = time_optimal_law(q, np.zeros(3), np.zeros(3), SegmentLimits(V_MAX, np.full(7, 1e6)))
+    dq, _ = path_derivatives(q)
+    integrand = np.max(np.abs(dq) / V_MAX, axis=1)
+    integral = float(np.sum(0.5 * (integrand[1:] + integrand[:-1])) / (len(q) - 1))
+    assert law.duration == pytest.approx(integral, rel=0.02)
+    per_joint = np.abs(np.diff(q, axis=0)).sum(axis=0) / V_MAX
+    assert law.duration >= per_joint.max() * (1 - 1e-9)
+
+
+def test_tool_and_slip_limits_bind_when_they_are_the_tightest() -> None:
+    q = _path(2)
+    dp = np.array([0.3, 0.0, 0.0])
+    free = time_optimal_law(q, dp, np.zeros(3), SegmentLimits(V_MAX, A_MAX))
+    slow = time_optimal_law(
+        q, dp, np.zeros(3), SegmentLimits(V_MAX, A_MAX, tool_speed=0.05, tool_accel=0.1)
+    )
+    # 0.3 m at ≤ 0.05 m/s with ≤ 0.1 m/s²: at least 6 s (plus the ramps).
+    assert slow.duration >= 0.3 / 0.05 and slow.duration > free.duration
+    assert max(slow.u_dot) * 0.3 <= 0.05 * (1 + 1e-9)
+    with pytest.raises(PlanError, match="too heavy for the grip"):
+        time_optimal_law(q, dp, np.zeros(3), SegmentLimits(V_MAX, A_MAX, slip_accel=5.0))
+
+
+def test_a_law_can_be_slowed_but_not_sped_up() -> None:
+    law = time_optimal_law(_path(4), np.zeros(3), np.zeros(3), SegmentLimits(V_MAX, A_MAX))
+    slow = scaled_law(law, 2 * law.duration)
+    assert slow.duration == pytest.approx(2 * law.duration)
+    for t in np.linspace(0, law.duration, 17):
+        u, ud = law(float(t))
+        u2, ud2 = slow(float(2 * t))
+        assert u2 == pytest.approx(u) and ud2 == pytest.approx(ud / 2)
+    with pytest.raises(PlanError, match="cannot be sped up"):
+        scaled_law(law, 0.5 * law.duration)
+
+
+def test_speed_override_is_validated() -> None:
+    for bad in (0.0, -0.5, 1.5, math.nan):
+        with pytest.raises(InvalidInputError, match=r"speed must be a number in \(0, 1\]"):
+            TimingConfig(speed=bad)
+
+
+def test_retimed_plan_keeps_its_path_and_phases_and_beats_the_cartesian_timing() -> None:
+    _, task, _ = prepare(RunRequest())
+    planning = task.planning
+    assert planning is not None and planning.chosen is not None
+    timed = task.plan
+    names = [k.name for k in timed.trajectory.keyframes]
+    assert names[0] == "initial" and names[-1] == "retreat"
+    times = [k.t for k in timed.trajectory.keyframes]
+    assert all(b > a for a, b in itertools.pairwise(times))
+    phases = timed.phases
+    assert phases is not None and phases.grip_closed in times and phases.release in times
+    # Every keyframe pose is reached exactly, at rest.
+    for k in timed.trajectory.keyframes:
+        x, V, _ = timed.trajectory.sample(k.t)
+        np.testing.assert_allclose(x[4:], k.X_WG.translation(), atol=1e-9)
+        assert np.max(np.abs(V)) <= 1e-9
+    assert timed.trajectory.end_time < 5.0  # the Cartesian timing took 13.9 s
+
+
+def test_quarter_speed_takes_about_four_times_as_long_and_succeeds() -> None:
+    _, fast_task, _ = prepare(RunRequest())
+    _, slow_task, slow = prepare(RunRequest(speed=0.25))
+    c = PlanConfig()
+    holds = c.settle_time + c.close_time + c.open_time  # the gripper's own times do not scale
+
+    def motion(task) -> float:  # type: ignore[no-untyped-def]
+        return task.trajectory.end_time - holds
+
+    assert motion(slow_task) / motion(fast_task) == pytest.approx(4.0, rel=0.05)
+    s = slow.run().summary()
+    assert s["success"], s["failure"]
+    assert s["max_joint_speed_ratio"] <= 0.25 * 1.05
+
+
+def test_the_cycle_time_bound_is_a_lower_bound_of_the_run() -> None:
+    _, task, sim = prepare(RunRequest())
+    s = sim.run().summary()
+    assert s["success"]
+    bound = cycle_time_bound(task.trajectory.keyframes, sim.dt, sim.log.q_cmd, sim.scene.v_max)
+    assert 0 < bound <= s["cycle_time_s"]
+    assert s["cycle_time_s"] == pytest.approx(task.trajectory.end_time)
