@@ -116,8 +116,8 @@ class Obstacle:
 
     The scene parks a mocap body ``obstacle`` far out of the way; at tick 0 this fault moves
     it onto the planned tool path: the point of the middle half of the plan's transport phase
-    farthest from where the tool is when it appears. The checks must report the robot's
-    collision at the tick of first contact.
+    farthest from the rest of the tool's path (so only the transfer runs into it). The checks
+    must report the robot's collision at the tick of first contact.
     """
 
     name = "obstacle"
@@ -134,12 +134,15 @@ class Obstacle:
         if tick != 0 or world.plan.phases is None:
             return None
         start, end = world.plan.phases.transport
-        sample = world.plan.trajectory.sample
+        traj = world.plan.trajectory
         quarter = 0.25 * (end - start)
-        times = np.linspace(start + quarter, end - quarter, 51).tolist()
-        path = np.array([sample(t)[0][4:] for t in times])
-        p_now = sample(tick * world.dt)[0][4:]
-        p_W = path[int(np.argmax(np.linalg.norm(path - p_now, axis=1)))]
+        inside = np.array(
+            [traj.sample(t)[0][4:] for t in np.linspace(start + quarter, end - quarter, 41)]
+        )
+        others = [t for t in np.linspace(0.0, traj.end_time, 400) if not start <= t <= end]
+        outside = np.array([traj.sample(t)[0][4:] for t in others])
+        clearance = np.linalg.norm(inside[:, None] - outside[None], axis=2).min(axis=1)
+        p_W = inside[int(np.argmax(clearance))]
         m, d = world.model, world.data
         d.mocap_pos[self.mocap] = p_W
         mujoco.mj_forward(m, d)

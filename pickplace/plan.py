@@ -50,6 +50,10 @@ class PlanConfig:
         min_segment_duration: Lower bound of every segment duration [s].
         time_quantum: When > 0, every segment duration is rounded up to a whole number of
             these [s] (the pre-flight's path sweep puts its ticks on the keyframes with it).
+        pass_through: The tool passes through the via points (pre-pick, lift, clearance,
+            pre-place) without stopping, the approach and the transfer being smooth curves;
+            False: straight lines with a stop at every keyframe. (Under a motion profile it
+            comes to rest at every keyframe either way; the robot's timing does not.)
         profile: Motion profile name: "sine", "minimum-jerk" or "linear" (tests only).
     """
 
@@ -66,12 +70,13 @@ class PlanConfig:
     closed_width: float = 0.0
     min_segment_duration: float = 0.05
     time_quantum: float = 0.0
+    pass_through: bool = True
     profile: str = "sine"
 
     def __post_init__(self) -> None:
         """Validate every field; raise PlanError (UnknownNameError for ``profile``)."""
         for f in fields(self):
-            if f.name == "profile":
+            if f.name in ("profile", "pass_through"):
                 continue
             value = getattr(self, f.name)
             if f.name in ("settle_time", "closed_width", "time_quantum"):
@@ -160,12 +165,16 @@ class Waypoint:
         gripper_width: Commanded finger gap [m].
         min_duration: Lower bound of the duration of the segment that ends here [s]
             (e.g. the closing time of an in-place gripper action); ignored for the first.
+        stop: The tool comes to rest here (else it passes through: see :class:`Keyframe`).
+        curve: The segment that ends here is a smooth curve, not a straight line.
     """
 
     name: str
     X_WG: SE3
     gripper_width: float
     min_duration: float = 0.0
+    stop: bool = True
+    curve: bool = False
 
     def __post_init__(self) -> None:
         """Validate the pose and ``min_duration`` (the name and width are checked by the
@@ -200,7 +209,8 @@ def time_keyframes(
     """Give waypoints times: the first at 0 s, each next one a segment duration later.
 
     The segment ending at waypoint ``k`` lasts
-    ``max(segment_duration(X_{k-1}, X_k, config), waypoints[k].min_duration)``, rounded up to
+    ``max(segment_duration(X_{k-1}, X_k, config), waypoints[k].min_duration)`` — for a curve
+    at least what its own path's largest derivatives need under the profile — rounded up to
     whole ``config.time_quantum`` when that is set.
 
     Raises:
@@ -208,16 +218,36 @@ def time_keyframes(
     """
     if len(waypoints) < 2:
         raise PlanError(f"waypoints must contain at least 2 entries, got {len(waypoints)}")
-    t = 0.0
-    keyframes = [Keyframe(waypoints[0].name, t, waypoints[0].X_WG, waypoints[0].gripper_width)]
+    durations = [segment_duration(a.X_WG, b.X_WG, config) for a, b in itertools.pairwise(waypoints)]
+    if any(w.curve for w in waypoints):
+        # A curve is longer than its chord and bends: time it by its own path's largest
+        # derivatives (the geometry does not depend on the times).
+        draft = PoseTrajectory(_keyframes(waypoints, durations), config.profile)
+        profile = config.motion_profile
+        c_v, c_a = profile.peak_speed_factor, profile.peak_accel_factor
+        for i, (d1, d2, a1, a2) in enumerate(draft.path_derivative_bounds()):
+            need = [c_v * d1 / config.max_linear_speed, c_v * a1 / config.max_angular_speed]
+            if math.isfinite(c_a):
+                need.append(math.sqrt((d2 * c_v**2 + d1 * c_a) / config.max_linear_accel))
+                need.append(math.sqrt((a2 * c_v**2 + a1 * c_a) / config.max_angular_accel))
+            durations[i] = max(durations[i], *need)
     quantum = config.time_quantum
-    for prev, w in itertools.pairwise(waypoints):
-        duration = max(segment_duration(prev.X_WG, w.X_WG, config), w.min_duration)
+    for i, w in enumerate(waypoints[1:]):
+        durations[i] = max(durations[i], w.min_duration)
         if quantum > 0.0:
-            duration = math.ceil(duration / quantum - 1e-9) * quantum
-        t += duration
-        keyframes.append(Keyframe(w.name, t, w.X_WG, w.gripper_width))
-    return keyframes
+            durations[i] = math.ceil(durations[i] / quantum - 1e-9) * quantum
+    return _keyframes(waypoints, durations)
+
+
+def _keyframes(waypoints: Sequence[Waypoint], durations: Sequence[float]) -> list[Keyframe]:
+    """Keyframes of the waypoints, the first at 0 s and each next one a duration later."""
+    t = 0.0
+    out = []
+    for i, w in enumerate(waypoints):
+        if i:
+            t += durations[i - 1]
+        out.append(Keyframe(w.name, t, w.X_WG, w.gripper_width, w.stop, w.curve))
+    return out
 
 
 def _backed_off(X_WG: SE3, distance: float) -> SE3:
@@ -362,18 +392,28 @@ def plan_pick_place(
     X_WG_clearance = SE3.from_rotation_and_translation(R_clearance, p_clearance)
 
     w_open, w_closed = config.open_width, config.closed_width
+    # The tool stops where the gripper acts and at the ends; it passes through pre-pick, lift,
+    # clearance and pre-place: the approach and the transfer are curves that leave and reach
+    # the straight vertical moves (descent, lift, place) along them.
+    passing = config.pass_through
     waypoints = [
         Waypoint("initial", X_WG_initial, w_open),
-        Waypoint("pre-pick", _backed_off(X_WG_pick, config.approach_distance), w_open),
+        Waypoint(
+            "pre-pick",
+            _backed_off(X_WG_pick, config.approach_distance),
+            w_open,
+            stop=not passing,
+            curve=passing,
+        ),
         Waypoint("pick", X_WG_pick, w_open),
     ]
     if config.settle_time > 0.0:
         waypoints.append(Waypoint("settle", X_WG_pick, w_open, config.settle_time))
     waypoints += [
         Waypoint("grip-closed", X_WG_pick, w_closed, config.close_time),
-        Waypoint("lift", X_WG_lift, w_closed),
-        Waypoint("clearance", X_WG_clearance, w_closed),
-        Waypoint("pre-place", X_WG_pre_place, w_closed),
+        Waypoint("lift", X_WG_lift, w_closed, stop=not passing),
+        Waypoint("clearance", X_WG_clearance, w_closed, stop=not passing, curve=passing),
+        Waypoint("pre-place", X_WG_pre_place, w_closed, stop=not passing, curve=passing),
         Waypoint("place", X_WG_place, w_closed),
         Waypoint("release", X_WG_place, w_open, config.open_time),
         Waypoint("retreat", _backed_off(X_WG_place, config.approach_distance), w_open),

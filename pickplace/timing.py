@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pickplace.errors import InvalidInputError, PlanError, require_positive
-from pickplace.geometry import rotation_log
+from pickplace.geometry import rotation_log, rotation_vector_W
 from pickplace.plan import Phases, Plan
 from pickplace.trajectory import Keyframe, PoseTrajectory
 
@@ -76,7 +76,7 @@ class TabulatedLaw:
     Attributes:
         t: Times of the grid points [s], from 0, increasing (K + 1,).
         u: Path parameter at them [-] (K + 1,), from 0 to 1.
-        u_dot: Path speed at them [1/s] (K + 1,), zero at both ends.
+        u_dot: Path speed at them [1/s] (K + 1,): zero at an end where the tool stops.
         u_ddot: Path acceleration on each interval [1/s²] (K,).
     """
 
@@ -94,177 +94,223 @@ class TabulatedLaw:
         """(u, u̇) at local time ``t`` [s], clamped to [0, duration]."""
         times = self.t
         if t <= 0.0:
-            return 0.0, 0.0
+            return 0.0, self.u_dot[0]
         if t >= times[-1]:
-            return 1.0, 0.0
+            return 1.0, self.u_dot[-1]
         k = bisect.bisect_right(times, t) - 1
         d = t - times[k]
         w = self.u_ddot[k]
         return self.u[k] + (self.u_dot[k] + 0.5 * w * d) * d, self.u_dot[k] + w * d
 
 
-def path_derivatives(q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """q'(u) and q''(u) on a uniform grid u_k = k / N from samples q (N + 1, n).
+def path_derivatives(
+    q: npt.ArrayLike, s: npt.ArrayLike | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """f'(s) and f''(s) from samples f (K, n) on a grid s (K,) (default: uniform on [0, 1]).
 
-    Second-order central differences inside, second-order one-sided at the ends.
+    Second-order three-point differences inside (for unequal spacing too), second-order
+    one-sided at the ends, where f'' repeats its neighbour's.
 
     Raises:
-        PlanError: Fewer than 3 samples.
+        PlanError: Fewer than 3 samples, or a grid that is not increasing.
     """
-    q = np.asarray(q, dtype=np.float64)
-    if q.ndim != 2 or len(q) < 3:
-        raise PlanError(f"a joint path needs at least 3 samples (N + 1, n), got {q.shape}")
-    n = len(q) - 1
-    h = 1.0 / n
-    dq = np.empty_like(q)
-    dq[1:-1] = (q[2:] - q[:-2]) / (2 * h)
-    dq[0] = (-3 * q[0] + 4 * q[1] - q[2]) / (2 * h)
-    dq[-1] = (3 * q[-1] - 4 * q[-2] + q[-3]) / (2 * h)
-    ddq = np.empty_like(q)
-    ddq[1:-1] = (q[2:] - 2 * q[1:-1] + q[:-2]) / h**2
-    ddq[0], ddq[-1] = ddq[1], ddq[-2]
-    return dq, ddq
+    f = np.asarray(q, dtype=np.float64)
+    if f.ndim != 2 or len(f) < 3:
+        raise PlanError(f"a path needs at least 3 samples (K, n), got {f.shape}")
+    grid = np.linspace(0.0, 1.0, len(f)) if s is None else np.asarray(s, dtype=np.float64)
+    h = np.diff(grid)
+    if grid.shape != (len(f),) or np.any(h <= 0):
+        raise PlanError("a path's grid must increase strictly, one value per sample")
+    h1, h2 = h[:-1, None], h[1:, None]
+    fm, f0, fp = f[:-2], f[1:-1], f[2:]
+    df = np.empty_like(f)
+    ddf = np.empty_like(f)
+    df[1:-1] = (
+        (-h2 / (h1 * (h1 + h2))) * fm + ((h2 - h1) / (h1 * h2)) * f0 + (h1 / (h2 * (h1 + h2))) * fp
+    )
+    ddf[1:-1] = 2 * (fm / (h1 * (h1 + h2)) - f0 / (h1 * h2) + fp / (h2 * (h1 + h2)))
+    a, b = h[0], h[1]
+    df[0] = (
+        (-(2 * a + b) / (a * (a + b))) * f[0]
+        + ((a + b) / (a * b)) * f[1]
+        - (a / (b * (a + b))) * f[2]
+    )
+    a, b = h[-1], h[-2]
+    df[-1] = (
+        ((2 * a + b) / (a * (a + b))) * f[-1]
+        - ((a + b) / (a * b)) * f[-2]
+        + (a / (b * (a + b))) * f[-3]
+    )
+    ddf[0], ddf[-1] = ddf[1], ddf[-2]
+    return df, ddf
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The time-optimal motion along a path grid: times, speeds and accelerations.
+
+    Attributes:
+        s: The path grid (K,) [path units].
+        t: Times at the grid points (K,) [s], from 0.
+        s_dot: Path speeds there (K,) [1/s in path units].
+        s_ddot: Path acceleration on each interval (K − 1,).
+    """
+
+    s: np.ndarray
+    t: np.ndarray
+    s_dot: np.ndarray
+    s_ddot: np.ndarray
+
+    def law(self, k0: int, k1: int) -> TabulatedLaw:
+        """The part between grid points k0 and k1 as a law of u = (s − s_k0)/(s_k1 − s_k0)."""
+        span = float(self.s[k1] - self.s[k0])
+        return TabulatedLaw(
+            tuple((self.t[k0 : k1 + 1] - self.t[k0]).tolist()),
+            tuple(((self.s[k0 : k1 + 1] - self.s[k0]) / span).tolist()),
+            tuple((self.s_dot[k0 : k1 + 1] / span).tolist()),
+            tuple((self.s_ddot[k0:k1] / span).tolist()),
+        )
+
+
+def time_optimal_profile(
+    q: npt.ArrayLike,
+    s: npt.ArrayLike,
+    p_W: npt.ArrayLike,
+    r_W: npt.ArrayLike,
+    limits: SegmentLimits,
+) -> Profile:
+    """The fastest motion along a sampled path that respects every limit, at rest at both
+    ends (see the module docstring).
+
+    Args:
+        q: Joint path at the grid points, shape (K, n) [rad].
+        s: The grid (K,), increasing [path units, e.g. m].
+        p_W: Tool positions at the grid points (K, 3) [m].
+        r_W: Tool orientation as an accumulated world rotation vector (K, 3) [rad].
+        limits: The limits.
+
+    Raises:
+        PlanError: A limit leaves no motion possible, or the grid is not increasing.
+    """
+    grid = np.asarray(s, dtype=np.float64)
+    dq, ddq = path_derivatives(q, grid)
+    dp, ddp = path_derivatives(p_W, grid)
+    dr, ddr = path_derivatives(r_W, grid)
+    n_grid = len(dq)
+    h = np.diff(grid)
+    v_max = np.asarray(limits.v_max, dtype=np.float64)
+    a_max = np.asarray(limits.a_max, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        x_max = np.min((v_max / np.abs(dq)) ** 2, axis=1)
+        if limits.tool_speed is not None:
+            x_max = np.minimum(x_max, (limits.tool_speed / np.linalg.norm(dp, axis=1)) ** 2)
+        if limits.tool_angular_speed is not None:
+            speed = np.linalg.norm(dr, axis=1)
+            x_max = np.minimum(x_max, (limits.tool_angular_speed / speed) ** 2)
+    # Acceleration limits as rows c w + d x ≤ e (K, m): each joint both ways; the tool's
+    # linear and angular acceleration and the carried brick's a − g per axis, within
+    # limit / √3 (a box inside the limit's ball).
+    cs, ds, es = [dq, -dq], [ddq, -ddq], [np.broadcast_to(a_max, dq.shape)] * 2
+    root3 = math.sqrt(3.0)
+    if limits.tool_accel is not None:
+        bound = np.full(dp.shape, limits.tool_accel / root3)
+        cs += [dp, -dp]
+        ds += [ddp, -ddp]
+        es += [bound, bound]
+    if limits.tool_angular_accel is not None:
+        bound = np.full(dr.shape, limits.tool_angular_accel / root3)
+        cs += [dr, -dr]
+        ds += [ddr, -ddr]
+        es += [bound, bound]
+    if limits.slip_accel is not None:
+        budget = limits.slip_accel / root3
+        if budget < float(np.max(np.abs(GRAVITY_W))):
+            raise PlanError(
+                f"the carried brick would slip even at rest (its grip holds "
+                f"{limits.slip_accel:.2f} m/s² against gravity's 9.81): it is too heavy for "
+                "the grip"
+            )
+        g = np.broadcast_to(GRAVITY_W, dp.shape)
+        cs += [dp, -dp]
+        ds += [ddp, -ddp]
+        es += [budget + g, budget - g]
+    c = np.concatenate(cs, axis=1)
+    d = np.concatenate(ds, axis=1)
+    e = np.concatenate(es, axis=1)
+    x_max = np.minimum(x_max, _accel_feasible_x(c, d, e))
+    x_max[0] = x_max[-1] = 0.0  # at rest at both ends
+    if not np.all(np.isfinite(x_max)):
+        raise PlanError("a motion has no finite speed limit (nothing moves along it?)")
+    rows = [
+        list(zip(ck, dk, ek, strict=True))
+        for ck, dk, ek in zip(c.tolist(), d.tolist(), e.tolist(), strict=True)
+    ]
+    # Backward pass: the largest x_k from which x_{k+1} is reached without braking harder than
+    # allowed: w = (x_{k+1} − x_k)/(2h) ≥ every lower bound (e_j − d_j x_k)/c_j (c_j < 0),
+    # each linear in x_k: x_k ≤ (x_{k+1} − 2h e_j/c_j)/(1 − 2h d_j/c_j).
+    x = x_max.tolist()
+    hs = h.tolist()
+    for k in range(n_grid - 2, -1, -1):
+        bound_k, hk = x[k], hs[k]
+        for ci, di, ei in rows[k]:
+            if ci < -_TINY:
+                alpha = 1.0 - 2 * hk * di / ci
+                if alpha > _TINY:
+                    bound_k = min(bound_k, (x[k + 1] - 2 * hk * ei / ci) / alpha)
+        x[k] = max(bound_k, 0.0)
+    # Forward pass: the largest x_{k+1} reachable from x_k: w ≤ every upper bound.
+    for k in range(n_grid - 1):
+        hi = math.inf
+        for ci, di, ei in rows[k]:
+            if ci > _TINY:
+                hi = min(hi, (ei - di * x[k]) / ci)
+        if math.isfinite(hi):
+            x[k + 1] = max(0.0, min(x[k + 1], x[k] + 2 * hs[k] * hi))
+    xs = np.array(x)
+    sd = np.sqrt(np.maximum(xs, 0.0))
+    pair = sd[:-1] + sd[1:]
+    if np.any(pair <= _TINY):
+        raise PlanError("the timing stalls: a stretch of the path admits no speed")
+    t = np.concatenate([[0.0], np.cumsum(2 * h / pair)])
+    return Profile(grid, t, sd, (xs[1:] - xs[:-1]) / (2 * h))
 
 
 def time_optimal_law(
     q: npt.ArrayLike, dp_W: npt.ArrayLike, phi_W: npt.ArrayLike, limits: SegmentLimits
 ) -> TabulatedLaw:
-    """The fastest u(t) along a sampled joint path that respects every limit, at rest at both
-    ends (see the module docstring).
-
-    Args:
-        q: Joint path at u_k = k / N, shape (N + 1, n) [rad].
-        dp_W: Tool displacement over the segment, p' (3,) [m]: the line is p0 + u dp.
-        phi_W: Tool rotation vector over the segment, in world (3,) [rad].
-        limits: The segment's limits.
-
-    Raises:
-        PlanError: A limit leaves no motion possible (e.g. a zero speed limit).
-    """
-    dq, ddq = path_derivatives(q)
-    n_grid = len(dq)
-    h = 1.0 / (n_grid - 1)
-    v_max = np.asarray(limits.v_max, dtype=np.float64)
-    a_max = np.asarray(limits.a_max, dtype=np.float64)
-    dp = np.asarray(dp_W, dtype=np.float64)
-    lin, ang = float(np.linalg.norm(dp)), float(np.linalg.norm(phi_W))
-    # Speed limits: x ≤ x_max.
-    with np.errstate(divide="ignore"):
-        x_max = np.min((v_max / np.abs(dq)) ** 2, axis=1)
-    if limits.tool_speed is not None and lin > 0:
-        x_max = np.minimum(x_max, (limits.tool_speed / lin) ** 2)
-    if limits.tool_angular_speed is not None and ang > 0:
-        x_max = np.minimum(x_max, (limits.tool_angular_speed / ang) ** 2)
-    # Acceleration limits as c w + d x ≤ e, one row per bound: (K, m) arrays.
-    c = np.concatenate([dq, -dq], axis=1)
-    d = np.concatenate([ddq, -ddq], axis=1)
-    e = np.concatenate([np.broadcast_to(a_max, dq.shape)] * 2, axis=1)
-    w_lo, w_hi = -math.inf, math.inf
-    if limits.tool_accel is not None and lin > 0:
-        w_lo, w_hi = max(w_lo, -limits.tool_accel / lin), min(w_hi, limits.tool_accel / lin)
-    if limits.tool_angular_accel is not None and ang > 0:
-        bound = limits.tool_angular_accel / ang
-        w_lo, w_hi = max(w_lo, -bound), min(w_hi, bound)
-    if limits.slip_accel is not None and lin > 0:
-        # |dp w − g|² ≤ A²: lin² w² − 2 (dp·g) w + |g|² − A² ≤ 0.
-        b = float(dp @ GRAVITY_W)
-        disc = b * b - lin * lin * (float(GRAVITY_W @ GRAVITY_W) - limits.slip_accel**2)
-        if disc < 0:
-            raise PlanError(
-                f"the carried brick would slip even at rest (grip allows {limits.slip_accel:.2f} "
-                "m/s² against gravity's 9.81): it is too heavy for the grip"
-            )
-        root = math.sqrt(disc)
-        w_lo, w_hi = max(w_lo, (b - root) / lin**2), min(w_hi, (b + root) / lin**2)
-    if not w_lo < w_hi:
-        raise PlanError("the segment's acceleration limits leave no acceleration possible")
-    x_max = np.minimum(x_max, _accel_feasible_x(c, d, e, w_lo, w_hi))
-    x_max[0] = x_max[-1] = 0.0  # at rest at both ends
-    if not np.all(np.isfinite(x_max)):
-        raise PlanError("a motion segment has no finite speed limit (no joint moves?)")
-
-    # Per grid point, the rows as plain floats: upper bounds w ≤ (e − d x)/c for c > 0, and
-    # the backward pass's braking bounds for c < 0.
-    rows = [
-        list(zip(ck, dk, ek, strict=True))
-        for ck, dk, ek in zip(c.tolist(), d.tolist(), e.tolist(), strict=True)
-    ]
-
-    def w_max(k: int, x: float) -> float:
-        """Largest feasible acceleration at grid point k with speed² x."""
-        hi = w_hi
-        for ci, di, ei in rows[k]:
-            if ci > _TINY:
-                hi = min(hi, (ei - di * x) / ci)
-        return hi
-
-    # Backward pass: the largest x_k from which x_{k+1} is reached without braking harder than
-    # allowed: w = (x_{k+1} − x_k)/(2h) ≥ every lower bound (e_j − d_j x_k)/c_j (c_j < 0) and
-    # ≥ w_lo, each linear in x_k, so each gives x_k ≤ (x_{k+1} − 2h e_j/c_j)/(1 − 2h d_j/c_j).
-    x = x_max.tolist()
-    for k in range(n_grid - 2, -1, -1):
-        bound = x[k]
-        if math.isfinite(w_lo):
-            bound = min(bound, x[k + 1] - 2 * h * w_lo)
-        for ci, di, ei in rows[k]:
-            if ci < -_TINY:
-                alpha = 1.0 - 2 * h * di / ci
-                rhs = x[k + 1] - 2 * h * ei / ci
-                if alpha > _TINY:
-                    bound = min(bound, rhs / alpha)
-        x[k] = max(bound, 0.0)
-    # Forward pass: the largest x at k + 1 reachable from x at k.
-    for k in range(n_grid - 1):
-        hi = w_max(k, x[k])
-        if math.isfinite(hi):
-            x[k + 1] = max(0.0, min(x[k + 1], x[k] + 2 * h * hi))
-    return _law(np.array(x), h)
+    """The fastest u(t) along a joint path sampled at u_k = k / N on a straight segment (tool
+    displacement ``dp_W`` [m], rotation vector ``phi_W`` [rad]), at rest at both ends."""
+    q = np.asarray(q, dtype=np.float64)
+    u = np.linspace(0.0, 1.0, len(q))
+    p = u[:, None] * np.asarray(dp_W, dtype=np.float64)
+    r = u[:, None] * np.asarray(phi_W, dtype=np.float64)
+    return time_optimal_profile(q, u, p, r, limits).law(0, len(q) - 1)
 
 
-def _accel_feasible_x(
-    c: np.ndarray, d: np.ndarray, e: np.ndarray, w_lo: float, w_hi: float
-) -> np.ndarray:
-    """Per grid point, the largest x ≥ 0 for which some w satisfies every c w + d x ≤ e and
-    w_lo ≤ w ≤ w_hi (the maximum velocity curve of the acceleration limits).
+def _accel_feasible_x(c: np.ndarray, d: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Per grid point, the largest x ≥ 0 for which some w satisfies every c w + d x ≤ e (the
+    maximum velocity curve of the acceleration limits).
 
     Each row with c > 0 bounds w from above by (e − d x)/c, each with c < 0 from below; a w
     exists iff every lower bound is at most every upper bound, a condition linear in x per
     pair of rows. Rows with c = 0 bound x directly: d x ≤ e.
     """
     k_grid = c.shape[0]
-    box = np.ones((k_grid, 1))
-    # Rows as w ≤ a + b x (upper, c > 0) or w ≥ a + b x (lower, c < 0), with the box appended.
+    upper, lower = c > _TINY, c < -_TINY
     with np.errstate(divide="ignore", invalid="ignore"):
-        a_rows = np.concatenate([e / c, w_hi * box, w_lo * box], axis=1)
-        b_rows = np.concatenate([-d / c, 0 * box, 0 * box], axis=1)
-    upper = np.concatenate([c > _TINY, box > 0, box < 0], axis=1)
-    lower = np.concatenate([c < -_TINY, box < 0, box > 0], axis=1)
-    a_rows = np.where(upper | lower, a_rows, 0.0)
-    b_rows = np.where(upper | lower, b_rows, 0.0)
+        a_rows = np.where(upper | lower, e / np.where(upper | lower, c, 1.0), 0.0)
+        b_rows = np.where(upper | lower, -d / np.where(upper | lower, c, 1.0), 0.0)
     # lower_j(x) ≤ upper_i(x)  ⇔  (b_j − b_i) x ≤ a_i − a_j, for every upper i and lower j.
     coef = b_rows[:, None, :] - b_rows[:, :, None]  # [k, i, j]
-    with np.errstate(invalid="ignore"):
-        rhs = a_rows[:, :, None] - a_rows[:, None, :]
+    rhs = a_rows[:, :, None] - a_rows[:, None, :]
     pair = upper[:, :, None] & lower[:, None, :] & (coef > _TINY)
     with np.errstate(divide="ignore", invalid="ignore"):
         bound = np.where(pair, rhs / np.where(pair, coef, 1.0), np.inf)
     out = np.maximum(bound.reshape(k_grid, -1).min(axis=1), 0.0)
-    flat = np.abs(c) <= _TINY
+    flat = ~(upper | lower)
     with np.errstate(divide="ignore", invalid="ignore"):
         direct = np.where(flat & (d > _TINY), e / np.where(d > _TINY, d, 1.0), np.inf)
     return np.asarray(np.minimum(out, direct.min(axis=1)))
-
-
-def _law(x: np.ndarray, h: float) -> TabulatedLaw:
-    """The time law through speeds² x on the uniform grid of spacing h."""
-    sd = np.sqrt(np.maximum(x, 0.0))
-    dt = 2 * h / np.maximum(sd[:-1] + sd[1:], _TINY)
-    if not np.all(np.isfinite(dt)) or np.any(sd[:-1] + sd[1:] <= _TINY):
-        raise PlanError("the timing stalls: a stretch of the path admits no speed")
-    t = np.concatenate([[0.0], np.cumsum(dt)])
-    w = (x[1:] - x[:-1]) / (2 * h)
-    u = np.linspace(0.0, 1.0, len(x))
-    return TabulatedLaw(tuple(t.tolist()), tuple(u.tolist()), tuple(sd.tolist()), tuple(w.tolist()))
 
 
 def scaled_law(law: TabulatedLaw, duration: float) -> TabulatedLaw:
@@ -360,53 +406,83 @@ def retime(
     holds: Sequence[float],
     limits: Callable[[bool], SegmentLimits],
 ) -> Plan:
-    """The plan's path, timed by the robot: each motion segment time-optimally along the joint
-    path the pre-flight found, each in-place segment (a gripper action) for its hold time.
+    """The plan's path, timed by the robot: each motion time-optimally along the joint path
+    the pre-flight found, each in-place segment (a gripper action) for its hold time.
+
+    A motion runs from one stop to the next: consecutive moving segments joined at keyframes
+    the tool passes through are timed as one path (the path parameter is the segments' chord
+    length, under which their geometry is C1) and its profile is then cut at the keyframes.
 
     Args:
-        path_plan: The plan as swept by the pre-flight: its keyframes lie on pre-flight ticks.
+        path_plan: The plan as swept by the pre-flight: its keyframes lie on pre-flight ticks,
+            each segment traversed at constant parameter speed.
         times: The pre-flight's tick times [s] (n,), uniform.
         q: The joint path at those times [rad] (n, joints).
         holds: Per segment, the duration of an in-place segment [s] (ignored for motions).
-        limits: The limits of a segment, given whether the brick is carried in it.
+        limits: The limits of a motion, given whether the brick is carried in it.
 
     Returns:
-        The same keyframe poses and widths with new times, the motions under
+        The same keyframes (poses, widths, stops) with new times, the motions under
         :class:`TabulatedLaw` time laws, and the phases moved with their keyframes.
 
     Raises:
-        PlanError: The pre-flight ticks do not cover the plan, or a segment cannot be timed.
+        PlanError: The pre-flight ticks do not cover the plan, or a motion cannot be timed.
     """
     keyframes = path_plan.trajectory.keyframes
-    if len(holds) != len(keyframes) - 1:
+    sample = path_plan.trajectory.sample
+    n_seg = len(keyframes) - 1
+    if len(holds) != n_seg:
         raise PlanError(f"holds must have one entry per segment, got {len(holds)}")
     if len(times) < 2:
         raise PlanError("the pre-flight's joint path has fewer than 2 ticks")
     dt = float(times[1] - times[0])
     phases = path_plan.phases
     carry = (phases.grip_closed, phases.place_reached) if phases is not None else None
-    new_times = [0.0]
-    laws: list[TabulatedLaw | None] = []
-    for i, (a, b) in enumerate(itertools.pairwise(keyframes)):
-        dp = b.X_WG.translation() - a.X_WG.translation()
-        phi = rotation_log(b.X_WG.rotation() @ a.X_WG.rotation().inverse())
-        if float(np.linalg.norm(dp)) <= _STILL and float(np.linalg.norm(phi)) <= _STILL:
-            new_times.append(new_times[-1] + holds[i])
-            laws.append(None)
+    ticks = [round(k.t / dt) for k in keyframes]
+    if ticks[-1] >= len(q):
+        raise PlanError("the pre-flight's joint path ends before the plan does")
+    durations: list[float] = [0.0] * n_seg
+    laws: list[TabulatedLaw | None] = [None] * n_seg
+    i = 0
+    while i < n_seg:
+        if not _moves(keyframes[i], keyframes[i + 1]):
+            durations[i] = holds[i]
+            i += 1
             continue
-        k0, k1 = round(a.t / dt), round(b.t / dt)
-        if k1 >= len(q) or k1 - k0 < 2:
-            raise PlanError(
-                f"segment '{a.name}' -> '{b.name}' has {k1 - k0 + 1} pre-flight samples "
-                f"(need at least 3, and the path sweep must cover it)"
-            )
-        carried = carry is not None and carry[0] <= a.t and b.t <= carry[1]
-        law = time_optimal_law(q[k0 : k1 + 1], dp, phi, limits(carried))
-        new_times.append(new_times[-1] + law.duration)
-        laws.append(law)
+        j = i  # the motion: segments i..j, joined at keyframes the tool passes through
+        while (
+            j + 1 < n_seg
+            and not keyframes[j + 1].stop
+            and _moves(keyframes[j + 1], keyframes[j + 2])
+        ):
+            j += 1
+        grid, bounds = [0.0], [0]
+        for m in range(i, j + 1):
+            a, b = keyframes[m], keyframes[m + 1]
+            n = ticks[m + 1] - ticks[m]
+            if n < 2:
+                raise PlanError(
+                    f"segment '{a.name}' -> '{b.name}' has {n + 1} pre-flight samples (need 3)"
+                )
+            length = _path_length(a, b)
+            grid += (grid[-1] + length * np.arange(1, n + 1) / n).tolist()
+            bounds.append(bounds[-1] + n)
+        k0, k1 = ticks[i], ticks[j + 1]
+        poses = np.array([sample(float(times[k]))[0] for k in range(k0, k1 + 1)])
+        carried = (
+            carry is not None and carry[0] <= keyframes[i].t and keyframes[j + 1].t <= carry[1]
+        )
+        profile = time_optimal_profile(
+            q[k0 : k1 + 1], grid, poses[:, 4:], _accumulated_rotation(poses[:, :4]), limits(carried)
+        )
+        for m in range(i, j + 1):
+            law = profile.law(bounds[m - i], bounds[m - i + 1])
+            laws[m], durations[m] = law, law.duration
+        i = j + 1
+    new_times = [0.0, *itertools.accumulate(durations)]
     old_times = [k.t for k in keyframes]
     retimed = [
-        Keyframe(k.name, t, k.X_WG, k.gripper_width)
+        Keyframe(k.name, t, k.X_WG, k.gripper_width, k.stop, k.curve)
         for k, t in zip(keyframes, new_times, strict=True)
     ]
 
@@ -428,6 +504,30 @@ def retime(
 
 # A segment whose ends differ by less than this (position [m], angle [rad]) stays in place.
 _STILL = 1e-9
+# A pure turn counts this much path per radian in a motion's grid [m/rad].
+_TURN_LENGTH = 0.1
+
+
+def _moves(a: Keyframe, b: Keyframe) -> bool:
+    """True if the tool moves (or turns) between keyframes a and b."""
+    return _path_length(a, b) > _STILL
+
+
+def _path_length(a: Keyframe, b: Keyframe) -> float:
+    """The segment's length in the motion grid: its chord [m], or for a pure turn its angle
+    times _TURN_LENGTH."""
+    chord = float(np.linalg.norm(b.X_WG.translation() - a.X_WG.translation()))
+    if chord > _STILL:
+        return chord
+    return _TURN_LENGTH * float(
+        np.linalg.norm(rotation_log(a.X_WG.rotation().inverse() @ b.X_WG.rotation()))
+    )
+
+
+def _accumulated_rotation(quats: np.ndarray) -> np.ndarray:
+    """World rotation vectors (K, 3) accumulated step by step along orientations (K, 4) wxyz."""
+    steps = [rotation_vector_W(quats[k], quats[k + 1]) for k in range(len(quats) - 1)]
+    return np.vstack([np.zeros(3), np.cumsum(steps, axis=0)]) if steps else np.zeros((1, 3))
 
 
 def _index_of(times: list[float], t: float) -> int:

@@ -145,7 +145,7 @@ def profile_by_name(name: str) -> MotionProfile:
 
 @dataclass(frozen=True)
 class Keyframe:
-    """A pose the tool site passes through (at rest) at a given time.
+    """A pose the tool site passes through at a given time.
 
     Attributes:
         name: Label used in logs and recordings, e.g. ``"pick"`` (the run never reads it:
@@ -153,12 +153,18 @@ class Keyframe:
         t: Time [s].
         X_WG: Pose of the tool site G in world (unit quaternion, copied on construction).
         gripper_width: Commanded finger gap at this keyframe [m].
+        stop: The tool is at rest here; otherwise it passes through, its path and velocity
+            continuous (a via point).
+        curve: The segment that ends here is a smooth curve (a cubic Hermite that leaves and
+            reaches pass-through keyframes along their path tangent), not a straight line.
     """
 
     name: str
     t: float
     X_WG: SE3
     gripper_width: float
+    stop: bool = True
+    curve: bool = False
 
     def __post_init__(self) -> None:
         """Validate and normalise the fields; raise PlanError naming the bad field."""
@@ -185,6 +191,9 @@ def validate_keyframes(keyframes: Sequence[Keyframe]) -> None:
     """
     if len(keyframes) < 2:
         raise PlanError(f"keyframes must contain at least 2 entries, got {len(keyframes)}")
+    for end in (keyframes[0], keyframes[-1]):
+        if isinstance(end, Keyframe) and not end.stop:
+            raise PlanError(f"keyframe '{end.name}' is an end of the trajectory: it must stop")
     for previous, k in itertools.pairwise(keyframes):
         if not isinstance(k, Keyframe) or not isinstance(previous, Keyframe):
             raise PlanError(f"keyframes must be Keyframe objects, got {type(k).__name__}")
@@ -196,6 +205,94 @@ def validate_keyframes(keyframes: Sequence[Keyframe]) -> None:
 
 
 # ------------------------------------------------------------------------- trajectory
+
+# Two directions closer than this (1 − cos) count as the same [-].
+_PARALLEL = 1e-9
+
+
+def _via_tangents(
+    keyframes: Sequence[Keyframe],
+) -> tuple[list[FloatArray | None], list[tuple[float, float]]]:
+    """Per keyframe, the unit path tangent where the tool passes through (None where it stops),
+    and per segment the slopes (r0, r1) of its rotation progress at both ends.
+
+    The tangent at a pass-through keyframe is the direction of a straight neighbouring segment
+    (the line stays a line), or, between two curves, the direction from the previous keyframe
+    to the next. The angular velocity there is kept continuous: its rate per metre of path is
+    the mean of both segments' when both turn about one axis, zero otherwise.
+
+    Raises:
+        PlanError: A pass-through keyframe between two straight segments of different
+            directions (a corner cannot be passed without stopping).
+    """
+    pos = [np.asarray(k.X_WG.translation(), dtype=np.float64) for k in keyframes]
+    n = len(keyframes)
+    lengths = [float(np.linalg.norm(pos[i + 1] - pos[i])) for i in range(n - 1)]
+    phis = [
+        np.asarray(
+            keyframes[i]
+            .X_WG.rotation()
+            .apply(
+                rotation_log(
+                    keyframes[i].X_WG.rotation().inverse() @ keyframes[i + 1].X_WG.rotation()
+                )
+            )
+        )
+        for i in range(n - 1)
+    ]
+    tangents: list[FloatArray | None] = [None] * n
+    rates = [[1.0, 1.0] for _ in range(n - 1)]
+    for i in range(1, n - 1):
+        k = keyframes[i]
+        if k.stop:
+            continue
+        if lengths[i - 1] <= 1e-12 or lengths[i] <= 1e-12:
+            raise PlanError(
+                f"keyframe '{k.name}' passes through, but a neighbouring segment does not move"
+            )
+        incoming_line, outgoing_line = not k.curve, not keyframes[i + 1].curve
+        d_in = (pos[i] - pos[i - 1]) / lengths[i - 1]
+        d_out = (pos[i + 1] - pos[i]) / lengths[i]
+        if incoming_line and outgoing_line and float(d_in @ d_out) < 1.0 - _PARALLEL:
+            raise PlanError(
+                f"keyframe '{k.name}' passes through a corner between two straight segments: "
+                "it must stop, or one of them must be a curve"
+            )
+        if incoming_line:
+            tangents[i] = d_in
+        elif outgoing_line:
+            tangents[i] = d_out
+        else:
+            across = pos[i + 1] - pos[i - 1]
+            tangents[i] = across / float(np.linalg.norm(across))
+        a, b = phis[i - 1], phis[i]
+        na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+        rate = 0.0
+        if na > 1e-12 and nb > 1e-12 and float(a @ b) / (na * nb) > 1.0 - _PARALLEL:
+            rate = (na + nb) / (lengths[i - 1] + lengths[i])
+        rates[i - 1][1] = rate * lengths[i - 1] / na if na > 1e-12 else 0.0
+        rates[i][0] = rate * lengths[i] / nb if nb > 1e-12 else 0.0
+    return tangents, [(r[0], r[1]) for r in rates]
+
+
+def _curve(
+    a: Keyframe,
+    b: Keyframe,
+    t_a: FloatArray | None,
+    t_b: FloatArray | None,
+    rates: tuple[float, float],
+    curved: bool,
+) -> tuple[tuple[float, ...], ...] | None:
+    """The curve data of segment a → b (see :class:`_Segment`), or None for a plain line."""
+    if not curved and rates == (1.0, 1.0):
+        return None
+    p0 = np.asarray(a.X_WG.translation(), dtype=np.float64)
+    p1 = np.asarray(b.X_WG.translation(), dtype=np.float64)
+    dp = p1 - p0
+    length = float(np.linalg.norm(dp))
+    m0 = t_a * length if (curved and t_a is not None) else dp
+    m1 = t_b * length if (curved and t_b is not None) else dp
+    return (_xyz(p1), _xyz(m0), _xyz(m1), rates)
 
 
 def _xyz(v: FloatArray) -> tuple[float, float, float]:
@@ -219,6 +316,9 @@ class _Segment:
         p0_xyz: Position at the start [m].
         dp_xyz: Position change over the segment [m].
         omega_dir_W_xyz: R0 φ: the world-frame rotation vector of the segment [rad].
+        curve: For a curved segment, (p1, m0, m1, (r0, r1)): the end position, the Hermite
+            tangents at both ends [m] and the slopes of the rotation's progress g(u) at both
+            ends [-]; None for a straight line with g(u) = u.
     """
 
     t0: float
@@ -231,11 +331,13 @@ class _Segment:
     p0_xyz: tuple[float, float, float]
     dp_xyz: tuple[float, float, float]
     omega_dir_W_xyz: tuple[float, float, float]
+    curve: tuple[tuple[float, ...], ...] | None = None
 
 
 class TimeLaw(Protocol):
-    """A segment's path parameter over time: u(t) from 0 to 1 in ``duration``, at rest at both
-    ends (e.g. :class:`pickplace.timing.TabulatedLaw`, the robot's time-optimal timing)."""
+    """A segment's path parameter over time: u(t) from 0 to 1 in ``duration``, at rest where
+    its keyframes stop (e.g. :class:`pickplace.timing.TabulatedLaw`, the robot's time-optimal
+    timing)."""
 
     @property
     def duration(self) -> float:
@@ -286,7 +388,8 @@ class PoseTrajectory:
                 )
         self._times = [float(k.t) for k in keyframes]
         self._segments: list[_Segment] = []
-        for a, b in itertools.pairwise(self._keyframes):
+        tangents, rates = _via_tangents(self._keyframes)
+        for i, (a, b) in enumerate(itertools.pairwise(self._keyframes)):
             R0 = a.X_WG.rotation()
             phi = rotation_log(R0.inverse() @ b.X_WG.rotation())
             p0 = np.array(a.X_WG.translation(), dtype=np.float64)
@@ -304,6 +407,7 @@ class PoseTrajectory:
                     p0_xyz=_xyz(p0),
                     dp_xyz=_xyz(dp),
                     omega_dir_W_xyz=_xyz(omega_dir_W),
+                    curve=_curve(a, b, tangents[i], tangents[i + 1], rates[i], b.curve),
                 )
             )
 
@@ -336,6 +440,41 @@ class PoseTrajectory:
     def duration(self) -> float:
         """Total duration ``end_time - start_time`` [s]."""
         return self._times[-1] - self._times[0]
+
+    def path_derivative_bounds(self) -> list[tuple[float, float, float, float]]:
+        """Per segment, the largest |p'(u)|, |p''(u)| [m], |θ'(u)|, |θ''(u)| [rad] of its path
+        over u ∈ [0, 1]: what a time law scales into tool speeds and accelerations.
+
+        Exact: on a cubic Hermite p' is quadratic in u (|p'|² is largest at an end or where
+        p'·p'' = 0, a cubic's root) and p'' linear (largest at an end); likewise for the
+        rotation's progress g(u).
+        """
+        out = []
+        for seg in self._segments:
+            angle = float(np.linalg.norm(seg.phi))
+            if seg.curve is None:
+                out.append((float(np.linalg.norm(seg.dp_xyz)), 0.0, angle, 0.0))
+                continue
+            p1, m0, m1, (r0, r1) = (np.asarray(x, dtype=np.float64) for x in seg.curve)
+            p0 = np.asarray(seg.p0_xyz)
+            # p'(u) = A u² + B u + C, p''(u) = 2 A u + B (Hermite derivative coefficients).
+            A = 6 * p0 + 3 * m0 - 6 * p1 + 3 * m1
+            B = -6 * p0 - 4 * m0 + 6 * p1 - 2 * m1
+            C = m0
+            # d/du |p'|² / 2 = p'·p'' = 2A·A u³ + 3A·B u² + (B·B + 2A·C) u + B·C.
+            roots = np.roots([2 * A @ A, 3 * A @ B, B @ B + 2 * A @ C, B @ C])
+            us = [0.0, 1.0] + [
+                float(r.real) for r in roots if abs(r.imag) < 1e-12 and 0 < r.real < 1
+            ]
+            speed = max(float(np.linalg.norm(A * u * u + B * u + C)) for u in us)
+            accel = max(float(np.linalg.norm(2 * A * u + B)) for u in (0.0, 1.0))
+            # g'(u) = a u² + b u + r0 with a = 3 r0 + 3 r1 − 6, b = −4 r0 − 2 r1 + 6.
+            ga, gb = 3 * r0 + 3 * r1 - 6, -4 * r0 - 2 * r1 + 6
+            gus = [0.0, 1.0] + ([-gb / (2 * ga)] if ga and 0 < -gb / (2 * ga) < 1 else [])
+            rate = max(abs(ga * u * u + gb * u + r0) for u in gus)
+            rate_dot = max(abs(2 * ga * u + gb) for u in (0.0, 1.0))
+            out.append((speed, accel, angle * float(rate), angle * float(rate_dot)))
+        return out
 
     def segment_index(self, t: float) -> int:
         """Index ``i`` of the segment (keyframe ``i`` → ``i + 1``) active at time ``t`` [s].
@@ -385,6 +524,9 @@ class PoseTrajectory:
             s = self._profile.s(tau)
         else:
             s, s_dot = law(t - seg.t0)
+        if seg.curve is not None:
+            s_dot_law = s_dot if law is not None else None
+            return self._sample_curve(seg, seg.curve, s, s_dot_law, tau, width, t)
         quat = seg.q0.copy()
         mujoco.mju_quatIntegrate(quat, seg.phi, s)  # R0 · exp(s φ), φ in R0's frame
         # Plain float math for the 3-vectors (as exact as NumPy's, elementwise).
@@ -397,6 +539,37 @@ class PoseTrajectory:
             s_dot = self._profile.ds(tau) * seg.inv_duration
         wx, wy, wz = seg.omega_dir_W_xyz
         V_WG = np.array((s_dot * dpx, s_dot * dpy, s_dot * dpz, s_dot * wx, s_dot * wy, s_dot * wz))
+        return x_WG, V_WG, width
+
+    def _sample_curve(
+        self,
+        seg: _Segment,
+        curve: tuple[tuple[float, ...], ...],
+        s: float,
+        s_dot: float | None,
+        tau: float,
+        width: float,
+        t: float,
+    ) -> tuple[FloatArray, FloatArray, float]:
+        """:meth:`sample` on a curved segment: cubic Hermite position, rotation progress g(s)."""
+        p1, m0, m1, (r0, r1) = curve
+        s2, s3 = s * s, s * s * s
+        h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
+        d00, d10, d01, d11 = 6 * s2 - 6 * s, 3 * s2 - 4 * s + 1, -6 * s2 + 6 * s, 3 * s2 - 2 * s
+        p0 = seg.p0_xyz
+        pos = [h00 * p0[c] + h10 * m0[c] + h01 * p1[c] + h11 * m1[c] for c in range(3)]
+        dpos = [d00 * p0[c] + d10 * m0[c] + d01 * p1[c] + d11 * m1[c] for c in range(3)]
+        g = h10 * r0 + h01 + h11 * r1
+        dg = d10 * r0 + d01 + d11 * r1
+        quat = seg.q0.copy()
+        mujoco.mju_quatIntegrate(quat, seg.phi, g)
+        x_WG = np.array((*quat.tolist(), *pos))
+        if t <= self._times[0]:
+            return x_WG, np.zeros(6, dtype=np.float64), width
+        if s_dot is None:
+            s_dot = self._profile.ds(tau) * seg.inv_duration
+        w = seg.omega_dir_W_xyz
+        V_WG = np.array((*(s_dot * v for v in dpos), *(s_dot * dg * w[c] for c in range(3))))
         return x_WG, V_WG, width
 
     def sample_path(self, n: int) -> FloatArray:

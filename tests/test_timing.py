@@ -144,11 +144,15 @@ def test_retimed_plan_keeps_its_path_and_phases_and_beats_the_cartesian_timing()
     assert all(b > a for a, b in itertools.pairwise(times))
     phases = timed.phases
     assert phases is not None and phases.grip_closed in times and phases.release in times
-    # Every keyframe pose is reached exactly, at rest.
+    # Every keyframe pose is reached exactly; at rest where the tool stops, moving where it
+    # passes through (pre-pick, lift, clearance, pre-place: the motions are not cut there).
     for k in timed.trajectory.keyframes:
         x, V, _ = timed.trajectory.sample(k.t)
         np.testing.assert_allclose(x[4:], k.X_WG.translation(), atol=1e-9)
-        assert np.max(np.abs(V)) <= 1e-9
+        if k.stop:
+            assert np.max(np.abs(V)) <= 1e-9
+        else:
+            assert np.linalg.norm(V[:3]) > 0.05
     assert timed.trajectory.end_time < 5.0  # the Cartesian timing took 13.9 s
 
 

@@ -340,6 +340,7 @@ def test_sample_is_the_straight_line_and_slerp_of_the_lecture() -> None:
         brick_pose(0.05, -0.55, 0.035, 2.5),
         brick_pose(0.55, 0.0, 0.035, -0.3),
         0.26,
+        PlanConfig(pass_through=False),
         p_W_base=np.zeros(3),
     )
     traj = plan.trajectory
@@ -376,3 +377,72 @@ def test_sample_returns_new_arrays() -> None:
     a[1][:] = 0.0
     np.testing.assert_array_equal(traj.sample(t)[0], b[0])
     np.testing.assert_array_equal(traj.sample(t)[1], b[1])
+
+
+def _curved_plan(profile: str = "sine") -> PoseTrajectory:
+    X0 = SE3.from_rotation_and_translation(
+        SO3.from_rpy_radians(np.pi, 0.1, 2.0), np.array([0.4, -0.4, 0.3])
+    )
+    return plan_pick_place(
+        X0,
+        brick_pose(0.05, -0.55, 0.035, 2.5),
+        brick_pose(0.55, 0.0, 0.035, -0.3),
+        0.26,
+        PlanConfig(profile=profile),
+        p_W_base=np.zeros(3),
+    ).trajectory
+
+
+def test_pass_through_keyframes_are_on_a_c1_path_whose_velocity_is_its_derivative() -> None:
+    """The approach and the transfer are curves through the via points: positions are hit,
+    the path's tangent is continuous there, the straight moves (descent, lift, place) stay
+    straight, and the velocity is the central difference of the pose."""
+    traj = _curved_plan("linear")  # constant parameter speed: the tangent shows in V
+    kf = {k.name: k for k in traj.keyframes}
+    assert not kf["pre-pick"].stop and not kf["lift"].stop and not kf["clearance"].stop
+    for k in traj.keyframes:
+        np.testing.assert_allclose(
+            pose_at(traj, k.t).translation(), k.X_WG.translation(), atol=1e-12
+        )
+    for name in ("pre-pick", "lift", "clearance", "pre-place"):
+        t = kf[name].t
+        before, after = velocity_at(traj, t - 1e-9)[:3], velocity_at(traj, t + 1e-9)[:3]
+        cos = before @ after / (np.linalg.norm(before) * np.linalg.norm(after))
+        assert cos == pytest.approx(1.0, abs=1e-6), name
+    # Straight vertical moves stay straight: the descent from pre-pick to pick.
+    t0, t1 = kf["pre-pick"].t, kf["pick"].t
+    for t in np.linspace(t0, t1, 11):
+        p = pose_at(traj, float(t)).translation()
+        np.testing.assert_allclose(p[:2], kf["pick"].X_WG.translation()[:2], atol=1e-12)
+    # The velocity is the derivative of the pose.
+    h = 1e-6
+    for t in np.linspace(0.05, traj.end_time - 0.05, 97):
+        t = float(t)
+        i = traj.segment_index(t)
+        if abs(t - traj.keyframes[i].t) < 2 * h or abs(t - traj.keyframes[i + 1].t) < 2 * h:
+            continue
+        X_plus, X_minus = pose_at(traj, t + h), pose_at(traj, t - h)
+        v_fd = (X_plus.translation() - X_minus.translation()) / (2 * h)
+        w_fd = rotation_log(X_plus.rotation() @ X_minus.rotation().inverse()) / (2 * h)
+        np.testing.assert_allclose(velocity_at(traj, t), np.concatenate([v_fd, w_fd]), atol=2e-5)
+
+
+def test_curves_are_timed_within_the_cartesian_limits() -> None:
+    """A curve is longer than its chord: its own derivatives set its duration."""
+    config = PlanConfig()
+    traj = _curved_plan(config.profile)
+    speeds = [
+        np.linalg.norm(velocity_at(traj, float(t))[:3]) for t in np.linspace(0, traj.end_time, 4001)
+    ]
+    assert max(speeds) <= config.max_linear_speed * (1 + 1e-6)
+    assert max(speeds) > 0.5 * config.max_linear_speed
+
+
+def test_a_corner_between_two_lines_cannot_be_passed_through() -> None:
+    a = Keyframe("a", 0.0, pose(SO3.identity(), (0.0, 0.0, 0.0)), 0.0)
+    b = Keyframe("b", 1.0, pose(SO3.identity(), (0.1, 0.0, 0.0)), 0.0, stop=False)
+    c = Keyframe("c", 2.0, pose(SO3.identity(), (0.1, 0.1, 0.0)), 0.0)
+    with pytest.raises(PlanError, match="corner between two straight segments"):
+        PoseTrajectory([a, b, c])
+    with pytest.raises(PlanError, match="must stop"):
+        PoseTrajectory([a, Keyframe("z", 1.0, a.X_WG, 0.0, stop=False)])
