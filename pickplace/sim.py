@@ -291,7 +291,7 @@ class Simulation:
             raise InvalidInputError(
                 f"--control-rate {self.config.control_rate_hz:g} Hz is not a whole number of "
                 f"physics steps of {self.model.opt.timestep:g} s; valid rates divide "
-                f"{1.0 / self.model.opt.timestep:g} Hz (e.g. 100, 125, 250, 500)"
+                f"{1.0 / self.model.opt.timestep:g} Hz"
             )
         self.dt = self.substeps * self.model.opt.timestep
         if abs(controller.dt - self.dt) > 1e-12:
