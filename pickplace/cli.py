@@ -131,7 +131,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer")
-    run.add_argument("--control-rate", type=_finite_float, default=100.0, help="IK rate [Hz]")
+    run.add_argument(
+        "--control-rate",
+        type=_finite_float,
+        default=100.0,
+        help="IK rate [Hz], a whole number of physics steps in [100, 1000] (default: 100)",
+    )
     run.add_argument("--pace", type=_finite_float, help="run at most this many times real time")
     run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 

@@ -219,9 +219,15 @@ def mujoco_warnings() -> Iterator[list[str]]:
             yield collected
     finally:
         mujoco.set_mju_user_warning(previous)
-    messages = [" ".join(str(w.message).split()) for w in caught]
-    messages += [" ".join(m.split()) for m in c_messages]
-    for m in messages:
+    c_texts = [" ".join(m.split()) for m in c_messages]
+    messages = []
+    for w in caught:
+        text = " ".join(str(w.message).split())
+        if any(text.startswith(c) for c in c_texts):  # the bindings' copy of a C warning
+            messages.append(text)
+        else:  # not MuJoCo's: shown as it would have been
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+    for m in messages + c_texts:
         if m and m not in collected and not any(c.startswith(m) for c in collected):
             collected.append(m)
 
