@@ -173,7 +173,7 @@ class NonFiniteCheck(Check):
             if log.nonfinite[k] == CONTROLLER_NONFINITE
             else "simulation state became non-finite"
         )
-        return Failure(k, FailureReason.NAN, f"{what} at t={k * self.dt:.3f} s")
+        return Failure(k, FailureReason.NAN, f"{what} at t={log.t[k]:.3f} s")
 
 
 class QPSolutionCheck(Check):
@@ -187,7 +187,7 @@ class QPSolutionCheck(Check):
         if k is None:
             return None
         return Failure(
-            k, FailureReason.IK_FAILED, f"the QP found no solution at t={k * self.dt:.3f} s"
+            k, FailureReason.IK_FAILED, f"the QP found no solution at t={log.t[k]:.3f} s"
         )
 
 
@@ -205,7 +205,7 @@ class TrackingCheck(Check):
         status = IK_STATUSES[int(log.ik_status[k])]
         text = (
             f"commanded tool is {log.command_error[k] * 1000:.1f} mm from the plan at "
-            f"t={k * self.dt:.3f} s (limit {self.limit * 1000:.0f} mm; status {status})"
+            f"t={log.t[k]:.3f} s (limit {self.limit * 1000:.0f} mm; status {status})"
         )
         return Failure(k, FailureReason.IK_FAILED, text)
 
@@ -227,7 +227,7 @@ class SpeedLimitCheck(Check):
         j = int(np.argmax(np.abs(qdot) / self.v_max))
         text = (
             f"{self.names[j]} commanded at {abs(qdot[j]):.2f} rad/s, limit {self.v_max[j]:.2f} "
-            f"rad/s ({log.speed_ratio[k]:.4f}x) at t={k * self.dt:.3f} s"
+            f"rad/s ({log.speed_ratio[k]:.4f}x) at t={log.t[k]:.3f} s"
         )
         return Failure(k, FailureReason.LIMIT_VIOLATED, text)
 
@@ -243,9 +243,7 @@ class PositionLimitCheck(Check):
         k = first_tick(log.limit_violation[k0:k1] > self.tolerance, k0)
         if k is None:
             return None
-        text = (
-            f"a joint is {log.limit_violation[k]:.4f} rad past its limit at t={k * self.dt:.3f} s"
-        )
+        text = f"a joint is {log.limit_violation[k]:.4f} rad past its limit at t={log.t[k]:.3f} s"
         return Failure(k, FailureReason.LIMIT_VIOLATED, text)
 
 
@@ -270,7 +268,7 @@ class CollisionCheck(Check):
         for contact in scene.robot_world_contacts(scene.model, log.restore(k, self.data)):
             pair = f"{scene.geom_name(contact.geom)} touched {scene.geom_name(contact.other)}"
             break
-        text = f"{pair} with {log.robot_world_force[k]:.1f} N at t={k * self.ctx.dt:.3f} s"
+        text = f"{pair} with {log.robot_world_force[k]:.1f} N at t={log.t[k]:.3f} s"
         return Failure(k, FailureReason.COLLISION, text)
 
 

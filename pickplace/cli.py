@@ -1,7 +1,18 @@
 """The ``pickplace`` command: run a scenario, list scenarios, sweep many seeds.
 
-Exit codes: 0 success, 1 task failed, 2 bad input (one line on stderr, no traceback),
-130 interrupted (Ctrl-C; a recording in progress is flushed and readable).
+Exit codes (nothing else is ever returned, and no traceback is printed):
+
+- 0: success.
+- 1: the task failed (the JSON says why), or a sweep had a failed trial.
+- 2: bad input: one line on stderr naming the problem and the valid choices; nothing was run
+  and no file was touched.
+- 3: an output failed: the recording could not be written (disk full, file size limit, the
+  path is being written by another run), the viewer did not answer, or stdout could not be
+  written. One line on stderr; the JSON summary is still printed when stdout works, and an
+  older file at the ``--record`` path is left as it was.
+- 128 + N: stopped by signal N, the run's summary says ``interrupted`` and its recording is
+  complete: 130 Ctrl-C (SIGINT), 143 SIGTERM, 129 SIGHUP. 141 (SIGPIPE): stdout's reader went
+  away (``pickplace ... | head``); nothing more is printed.
 """
 
 from __future__ import annotations
@@ -15,11 +26,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from pickplace.checks import FailureReason
-from pickplace.errors import PickPlaceError
-from pickplace.scenarios import SCENARIOS, BrickPlacement
+from pickplace.errors import OutputError, PickPlaceError
+from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
+EXIT_INTERRUPTED = 130  # 128 + SIGINT; other signals give 128 + their number
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: stdout's reader went away
 
 
 class _Parser(argparse.ArgumentParser):
@@ -60,7 +72,13 @@ def _finite_float(text: str) -> float:
     return value
 
 
-def _brick(text: str) -> BrickPlacement:
+def _record_path(text: str) -> Path:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must be a file name ending in .rrd, got an empty name")
+    return Path(text)
+
+
+def _brick(text: str) -> tuple[float, float, float]:
     parts = text.split(",")
     usage = "must be X,Y,YAW: three finite numbers in metres and radians, e.g. 0.05,-0.55,0.3"
     if len(parts) != 3:
@@ -71,12 +89,32 @@ def _brick(text: str) -> BrickPlacement:
         raise argparse.ArgumentTypeError(f"{usage}; got '{text}'") from None
     if not all(math.isfinite(v) for v in (x, y, yaw)):
         raise argparse.ArgumentTypeError(f"{usage}; got '{text}'")
-    return BrickPlacement(x, y, yaw)
+    return (x, y, yaw)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("pickplace")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def _default_workers() -> int:
+    from pickplace.sweep import available_cpus
+
+    return available_cpus()
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pickplace``."""
-    parser = _Parser(prog="pickplace", description=__doc__)
+    parser = _Parser(
+        prog="pickplace",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"pickplace {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate one scenario")
@@ -85,10 +123,20 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
     run.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
     run.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
-    run.add_argument("--record", type=Path, help="write a Rerun recording to FILE.rrd")
+    run.add_argument(
+        "--record",
+        type=_record_path,
+        metavar="FILE.rrd",
+        help="write a Rerun recording to FILE.rrd (it appears there complete when the run ends)",
+    )
     run.add_argument("--spawn", action="store_true", help="stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="URL", help="stream to a running Rerun viewer")
-    run.add_argument("--control-rate", type=_finite_float, default=100.0, help="IK rate [Hz]")
+    run.add_argument(
+        "--control-rate",
+        type=_finite_float,
+        default=100.0,
+        help="IK rate [Hz], a whole number of physics steps in [100, 1000] (default: 100)",
+    )
     run.add_argument("--pace", type=_finite_float, help="run at most this many times real time")
     run.add_argument(
         "--speed",
@@ -121,15 +169,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     sweep = sub.add_parser("sweep", help="run many seeds of a scenario in parallel")
-    sweep.add_argument("--scenario", default="pick-place-random")
-    sweep.add_argument("--controller", default="qp")
-    sweep.add_argument("--trials", type=_positive_int, default=20)
-    sweep.add_argument("--seed", type=_seed, default=0, help="seed of the first trial")
+    sweep.add_argument(
+        "--scenario",
+        default="pick-place-random",
+        help="scenario name (default: pick-place-random; see pickplace scenarios)",
+    )
+    sweep.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    sweep.add_argument(
+        "--trials", type=_positive_int, default=20, help="number of trials (default: 20)"
+    )
+    sweep.add_argument(
+        "--seed", type=_seed, default=0, help="seed of the first trial; trial i uses SEED + i"
+    )
     sweep.add_argument(
         "--workers",
         type=_positive_int,
-        default=os.cpu_count() or 1,
-        help="parallel processes (default: one per CPU)",
+        default=None,
+        help="parallel processes (default: one per CPU this process may use); 1 runs the "
+        "trials in this process",
     )
     sweep.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     return parser
@@ -157,8 +214,75 @@ def _error_text(exc: PickPlaceError) -> str:
     return f"{option}: {text}" if option else text
 
 
+class _StdoutError(Exception):
+    """stdout could not be written; ``code`` is the exit code to return."""
+
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _to_stderr(line: str) -> None:
+    """Write one line on stderr; a closed or broken stderr is silently ignored."""
+    try:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        _point_at_devnull(2)
+
+
 def _print_error(message: str) -> None:
-    print(f"pickplace: error: {' '.join(str(message).split())}", file=sys.stderr)
+    _to_stderr(f"pickplace: error: {_one_line(message)}")
+
+
+def _print_warning(message: str) -> None:
+    _to_stderr(f"pickplace: warning: {_one_line(message)}")
+
+
+def _write_stdout(text: str) -> None:
+    """Print ``text`` and flush; raise _StdoutError (141 broken pipe, else 3) if stdout fails."""
+    try:
+        sys.stdout.write(text + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _point_at_devnull(1)  # so that the interpreter's final flush does not fail again
+        raise _StdoutError(EXIT_BROKEN_PIPE) from None
+    except (OSError, ValueError) as exc:
+        _point_at_devnull(1)
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        _print_error(f"cannot write the output to stdout: {reason}")
+        raise _StdoutError(EXIT_OUTPUT) from None
+
+
+def _point_at_devnull(fd: int) -> None:
+    """Make ``fd`` (1 or 2) /dev/null, dropping whatever is still buffered for it."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, fd)
+        os.close(null)
+    except OSError:
+        pass
+
+
+def _ensure_std_streams() -> None:
+    """Give closed standard file descriptors /dev/null (``2>&-``), so that no file the run
+    opens becomes fd 1 or 2 and no print fails; rebind a missing sys.stdout / sys.stderr."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+    if sys.stdout is None:
+        sys.stdout = open(1, "w", closefd=False)  # noqa: SIM115 (lives as long as the process)
+    if sys.stderr is None:
+        sys.stderr = open(2, "w", closefd=False)  # noqa: SIM115
 
 
 def _progress(total: float, label: str) -> Any:
@@ -224,15 +348,19 @@ def _human_summary(s: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    from pickplace.runner import RunRequest, run
+def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
+    from pickplace.runner import RunRequest, execute
+    from pickplace.scenarios import BrickPlacement
 
     progress = None if args.json else _progress(1.0, f"{args.scenario}")
+    observers: list[Any] = [InterruptGate(stop)]
+    if progress is not None:
+        observers.append(_ProgressObserver(progress))
     req = RunRequest(
         scenario=args.scenario,
         controller=args.controller,
         seed=args.seed,
-        brick=args.brick,
+        brick=BrickPlacement(*args.brick) if args.brick is not None else None,
         scene_path=args.scene,
         record=args.record,
         spawn=args.spawn,
@@ -240,27 +368,36 @@ def _cmd_run(args: argparse.Namespace) -> int:
         control_rate_hz=args.control_rate,
         pace=args.pace,
         speed=args.speed,
-        observers=[_ProgressObserver(progress)] if progress is not None else [],
+        observers=observers,
     )
-    result = run(req)
+    outcome = execute(req)
+    result = outcome.result
     summary = result.summary()
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        print(_human_summary(summary))
-    if result.failure is FailureReason.INTERRUPTED:
+    _write_stdout(json.dumps(summary) if args.json else _human_summary(summary))
+    for warning in outcome.warnings[:1]:
+        _print_warning(warning)
+    interrupted = summary["failure"] == "interrupted" and stop.interrupted
+    if outcome.output_error is not None:
+        _print_error(outcome.output_error)
+        if not interrupted:
+            return EXIT_OUTPUT
+    if interrupted:
+        _to_stderr(f"pickplace: stopped by {signal_name(stop.signum or 2)}")
+        return stop.exit_code
+    if summary["failure"] == "interrupted":  # a KeyboardInterrupt raised without a signal
         return EXIT_INTERRUPTED
     return EXIT_OK if result.success else EXIT_FAILED
 
 
-def _cmd_plan(args: argparse.Namespace) -> int:
+def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.runner import RunRequest, plan_report
+    from pickplace.scenarios import BrickPlacement
 
     req = RunRequest(
         scenario=args.scenario,
         controller=args.controller,
         seed=args.seed,
-        brick=args.brick,
+        brick=BrickPlacement(*args.brick) if args.brick is not None else None,
         scene_path=args.scene,
         speed=args.speed,
     )
@@ -272,10 +409,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         **report.as_dict(),
         "planning_time_s": report.planning_time_s,
     }
-    if args.json:
-        print(json.dumps(out))
-    else:
-        print(_human_plan(out))
+    _write_stdout(json.dumps(out) if args.json else _human_plan(out))
     return EXIT_OK if report.feasible else EXIT_FAILED
 
 
@@ -311,24 +445,47 @@ def _human_plan(p: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _cmd_scenarios(args: argparse.Namespace) -> int:
+def _cmd_scenarios(args: argparse.Namespace, stop: InterruptHandler) -> int:
+    from pickplace.scenarios import SCENARIOS
+
     if args.json:
-        print(
+        _write_stdout(
             json.dumps(
                 {s.name: {"summary": s.summary, "expected": s.expected} for s in SCENARIOS.values()}
             )
         )
         return EXIT_OK
     width = max(len(name) for name in SCENARIOS)
-    for s in SCENARIOS.values():
-        print(f"{s.name:<{width}}  {s.summary}")
+    _write_stdout("\n".join(f"{s.name:<{width}}  {s.summary}" for s in SCENARIOS.values()))
     return EXIT_OK
 
 
-def _cmd_sweep(args: argparse.Namespace) -> int:
+def _human_sweep(report: dict[str, Any]) -> str:
+    p50, p95 = report["place_error_p50_m"], report["place_error_p95_m"]
+    rate = report["trials_per_second"]
+    lines = [
+        f"{report['scenario']} / {report['controller']}: {report['successes']}/"
+        f"{report['completed']} succeeded ({report['success_rate']:.0%})"
+        + (f" of {report['trials']} requested" if report["completed"] < report["trials"] else "")
+        + (f", {rate:.2f} trials/s" if rate is not None else "")
+        + f" with {report['workers']} worker(s)"
+    ]
+    if report["interrupted"]:
+        lines.append("  interrupted: the trials not finished are left out")
+    if p50 is not None:
+        lines.append(f"  place error p50 {p50 * 1000:.2f} mm, p95 {p95 * 1000:.2f} mm")
+    if report["min_singular_value"] is not None:
+        lines.append(f"  min singular value {report['min_singular_value']:.4f}")
+    for reason, seeds in report["failed_seeds"].items():
+        lines.append(f"  {reason}: seeds {' '.join(map(str, seeds))}")
+    return "\n".join(lines)
+
+
+def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.sweep import SweepRequest, run_sweep
 
-    req = SweepRequest(args.scenario, args.controller, args.trials, args.seed, args.workers)
+    workers = args.workers if args.workers is not None else _default_workers()
+    req = SweepRequest(args.scenario, args.controller, args.trials, args.seed, workers)
     req.validate()
     progress = None if args.json else _progress(float(args.trials), f"sweep {args.scenario}")
     if progress is not None:
@@ -338,46 +495,67 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         if progress is not None:
             progress.advance(progress.tasks[0].id)
 
+    stop.arm()
     try:
         report = run_sweep(req, on_trial=advance)
     finally:
+        stop.disarm()
         if progress is not None:
             progress.stop()
-    if args.json:
-        print(json.dumps(report))
-    else:
-        p50, p95 = report["place_error_p50_m"], report["place_error_p95_m"]
-        print(
-            f"{report['scenario']} / {report['controller']}: {report['successes']}/"
-            f"{report['trials']} succeeded ({report['success_rate']:.0%}), "
-            f"{report['trials_per_second']:.2f} trials/s with {report['workers']} worker(s)"
-        )
-        if p50 is not None:
-            print(f"  place error p50 {p50 * 1000:.2f} mm, p95 {p95 * 1000:.2f} mm")
-        print(f"  min singular value {report['min_singular_value']:.4f}")
-        for reason, seeds in report["failed_seeds"].items():
-            print(f"  {reason}: seeds {' '.join(map(str, seeds))}")
+    _write_stdout(json.dumps(report) if args.json else _human_sweep(report))
+    if report["interrupted"]:
+        _to_stderr(f"pickplace: stopped by {signal_name(stop.signum or 2)}")
+        return stop.exit_code
     return EXIT_OK if report["successes"] == report["trials"] else EXIT_FAILED
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pickplace`` console script."""
-    parser = build_parser()
+    stop = InterruptHandler().install()
+    _ensure_std_streams()
+    # Rerun's own log lines (coloured, several per problem) would repeat what the one-line
+    # messages here say; RUST_LOG=warn in the environment shows them again.
+    os.environ.setdefault("RUST_LOG", "off")
     try:
+        return _main(argv, stop)
+    finally:
+        stop.uninstall()
+
+
+def _main(argv: Sequence[str] | None, stop: InterruptHandler) -> int:
+    try:
+        parser = build_parser()
         args = parser.parse_args(argv)
-        handlers = {
+        commands = {
             "run": _cmd_run,
             "plan": _cmd_plan,
             "scenarios": _cmd_scenarios,
             "sweep": _cmd_sweep,
         }
-        return handlers[args.command](args)
+        return commands[args.command](args, stop)
+    except _StdoutError as exc:
+        return exc.code
+    except OutputError as exc:
+        _print_error(str(exc))
+        return EXIT_OUTPUT
     except PickPlaceError as exc:
         _print_error(_error_text(exc))
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("pickplace: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except (Interrupted, KeyboardInterrupt):
+        _to_stderr("pickplace: interrupted before the run started")
+        return stop.exit_code
+    except SystemExit as exc:  # argparse: --help, --version, usage errors
+        if exc.code not in (0, None):
+            return int(exc.code) if isinstance(exc.code, int) else EXIT_BAD_INPUT
+        try:
+            sys.stdout.flush()
+        except BrokenPipeError:
+            _point_at_devnull(1)
+            return EXIT_BROKEN_PIPE
+        except OSError:
+            _point_at_devnull(1)
+            return EXIT_OUTPUT
+        return EXIT_OK
 
 
 if __name__ == "__main__":

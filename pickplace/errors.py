@@ -68,6 +68,11 @@ class RecordingError(PickPlaceError):
     """A recording could not be opened or written."""
 
 
+class OutputError(RecordingError):
+    """A requested output failed for a reason outside the inputs: the viewer does not answer,
+    the disk is full, or another run is writing the same recording path (CLI exit code 3)."""
+
+
 def require_finite(
     name: str, value: object, error: type[PickPlaceError] = InvalidInputError
 ) -> float:

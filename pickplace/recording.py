@@ -5,8 +5,11 @@ a viewer it spawns, a viewer at a gRPC URL, or several of them at once. Tick dat
 logged row by row: it is read from the run's preallocated :class:`~pickplace.ticklog.TickLog` and
 sent with ``send_columns`` every ``flush_every`` ticks (or sooner, once ``flush_interval_s`` of
 wall time has passed, so that a live viewer of a paced run stays current) and at the end, each
-batch followed by a flush, so an interrupted run keeps what was sent. The stream is closed in
-``on_finish`` (also after Ctrl-C), which writes the file's footer.
+batch handed to the viewers at once. The file's bytes are encoded in memory and written in
+``on_finish`` (also after Ctrl-C, SIGTERM or SIGHUP) to a temporary file, which is renamed onto
+its path once it reads back complete, so the path holds either a complete recording (footer,
+summary, verdict) or what was there before. See :class:`Recorder` for the file and the
+viewers, and :mod:`pickplace.viewer` for the bounds on waiting for a viewer.
 
 Timelines: ``sim_time`` (duration, the simulated time at the end of the tick) and ``tick``
 (sequence, the control tick index k). Quaternions are stored xyzw. Lengths in m, angles in
@@ -51,8 +54,10 @@ joints, gripper and IK) and the event log.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,7 +70,10 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from pickplace.controllers import IK_STATUSES
-from pickplace.errors import InvalidInputError, RecordingError, require_positive
+from pickplace.errors import InvalidInputError, OutputError, RecordingError, require_positive
+from pickplace.outfile import OutputFile
+from pickplace.signals import deferred_interrupts
+from pickplace.viewer import FINISH_TIMEOUT_S, ViewerRelay, parse_viewer_url, spawn_viewer
 
 if TYPE_CHECKING:
     from pickplace.events import Event
@@ -78,8 +86,8 @@ APPLICATION_ID = "pickplace"
 SPAWN_PORT = 9876
 ELLIPSOID_SCALE = 0.1  # half sizes of the manipulability ellipsoid = this · σt [m per m/rad]
 PLANE_EXTENT = 2.0  # half extent drawn for an infinite plane [m]
-BATCH_FLUSH_TIMEOUT_S = 10.0
-CONNECT_TIMEOUT_S = 5.0
+ENCODE_TIMEOUT_S = 30.0  # bound on encoding what was logged (normally milliseconds) [s]
+VIEWER_FINISH_AFTER_INTERRUPT_S = 1.0  # time a viewer gets for the rest after Ctrl-C [s]
 KEYFRAME_MERGE_DISTANCE = 0.01  # keyframes closer than this share one label [m]
 # Default 3D camera: from the front right, above, looking down at both bins [m].
 EYE_POSITION = (1.2, -1.3, 1.05)
@@ -119,6 +127,22 @@ def _quat(q_wxyz: np.ndarray) -> rr.Quaternion:
 def _ns(t: np.ndarray) -> np.ndarray:
     """Seconds → timedelta64[ns], rounded (k·dt sums such as 0.09 + 0.01 land 1 ns short)."""
     return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype("timedelta64[ns]")
+
+
+def _incomplete(path: Path) -> str | None:
+    """None if the .rrd at ``path`` reads back with its footer and the summary, else what is
+    wrong (reads the footer's manifest, not the data: milliseconds)."""
+    from rerun.chunk import RrdReader
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "no footer" is reported below instead
+            entities = RrdReader(path).store().schema().entity_paths()
+    except (RuntimeError, OSError, ValueError) as exc:
+        return f"the file does not read back ({' '.join(str(exc).split())[:200]})"
+    if "/summary" not in entities:
+        return "the file lacks the summary"
+    return None
 
 
 def _part(name: str) -> str:
@@ -567,13 +591,28 @@ def build_blueprint() -> rrb.Blueprint:
 class Recorder:
     """Record a :class:`~pickplace.sim.Simulation` to Rerun (see the module docstring).
 
-    One recorder records one run. The sinks are opened here, so a bad path fails before the
-    simulation starts.
+    One recorder records one run. The constructor only checks its arguments; :meth:`open`
+    (called by the runner once every input is validated, or else by :meth:`on_start`) takes
+    the output path and reaches the viewer. So a run refused for bad input never touches a file.
+
+    The file: encoded in memory (a :class:`rerun.BinaryStream`; a run is a few MB), written
+    to a temporary file beside ``path`` when the run has finished (success, failure or
+    interruption) and renamed onto ``path`` once it reads back complete (footer and summary).
+    A run that crashed or could not write the file (disk full, file size limit) deletes it
+    and leaves an older file at ``path`` as it was; a killed run leaves the path as it was.
+    One writer per path (a lock beside it, see :mod:`pickplace.outfile`). Nothing of Rerun's
+    own file writer is used: its thread can deadlock after a write error.
+
+    The viewers: fed through relay processes (:mod:`pickplace.viewer`), so a viewer that
+    freezes, is stopped or goes away never blocks or ends the run: it is given up, an event
+    says so and the file recording continues. Problems of either kind are listed in
+    :attr:`file_error` and :attr:`warnings` after the run.
 
     Args:
         path: ``.rrd`` file to write, or None.
         recording_id: Recording id, e.g. ``pick-place/qp/seed-0``.
-        spawn: Also spawn a Rerun viewer and stream to it.
+        spawn: Also spawn a Rerun viewer (or use the one on port :data:`SPAWN_PORT`) and
+            stream to it.
         connect: Also stream to a viewer at this gRPC URL
             (e.g. ``rerun+http://127.0.0.1:9876/proxy``).
         flush_every: Ticks per ``send_columns`` batch (each batch is flushed). Every batch
@@ -582,9 +621,9 @@ class Recorder:
             since the last batch.
 
     Raises:
-        RecordingError: No sink was given or a sink cannot be opened.
-        InvalidInputError: ``flush_every`` is not a positive integer or ``flush_interval_s``
-            is not a positive number.
+        RecordingError: No sink was given.
+        InvalidInputError: ``flush_every`` is not a positive integer, ``flush_interval_s`` is
+            not a positive number, or ``connect`` is not a viewer URL.
     """
 
     def __init__(
@@ -607,58 +646,66 @@ class Recorder:
             raise RecordingError("a recording needs a file path, spawn=True or a connect URL")
         self.path = Path(path) if path is not None else None
         self.recording_id = recording_id
+        self.spawn = spawn
+        self.connect = parse_viewer_url(connect) if connect is not None else None
         self.flush_every = flush_every
         self.flush_interval_s = float(flush_interval_s)
+        self.file_error: str | None = None  # why the file could not be written
+        self.warnings: list[str] = []  # viewer problems (the run went on)
+        self.written: Path | None = None  # the file, once it is in place
         self._last_send = time.perf_counter()
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
         self.rec.set_log_time_enabled(False)
         self.rec.set_log_tick_enabled(False)
+        self._output = OutputFile(self.path) if self.path is not None else None
+        self._file_bytes: rr.BinaryStream | None = None  # the file, encoded in memory
+        self._viewer_bytes: rr.BinaryStream | None = None  # what the viewer relays receive
+        self._relays: list[ViewerRelay] = []
+        self._opened = False
         self._closed = False
-        self._failed = False
+        self._finished = False
         self._started = False
         self._sent = 0  # ticks already sent
         self._verdict_logged = False
+        self._early_events: list[Event] = []
         self._moving: list[tuple[int, str]] = []  # (body id, entity path)
         self._ik_status_names = ", ".join(f"{i} {s}" for i, s in enumerate(IK_STATUSES))
-        sinks: list[Any] = []
-        where: list[str] = []
-        try:
-            if self.path is not None:
-                where.append(f"file '{self.path}'")
-                sinks.append(rr.FileSink(str(self.path)))
-            if spawn:
-                where.append(f"spawned viewer on port {SPAWN_PORT}")
-                rr.spawn(port=SPAWN_PORT, connect=False, recording=self.rec)
-                sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{SPAWN_PORT}/proxy"))
-            if connect is not None:
-                where.append(f"viewer at '{connect}'")
-                sinks.append(rr.GrpcSink(connect))
-            self.rec.set_sinks(*sinks, default_blueprint=build_blueprint())
-        except (RuntimeError, OSError, ValueError) as exc:
-            self._closed = True
-            raise RecordingError(
-                f"cannot open the recording sink ({'; '.join(where)}): {exc}"
-            ) from exc
-        self._where = "; ".join(where)
-        if spawn or connect is not None:
-            # A viewer that is not there would otherwise only show up mid-run.
-            try:
-                self.rec.flush(timeout_sec=CONNECT_TIMEOUT_S)
-            except RuntimeError as exc:
-                self._abort()
-                if self.path is not None:
-                    self.path.unlink(missing_ok=True)  # the empty file this created
-                hint = (
-                    "did the spawned viewer start? It needs a display"
-                    if spawn
-                    else "is a viewer running there? Start one with `rerun`"
-                )
-                raise RecordingError(
-                    f"cannot reach the Rerun viewer ({self._where}) within "
-                    f"{CONNECT_TIMEOUT_S:.0f} s: {exc} ({hint})"
-                ) from exc
 
     # ------------------------------------------------------------------ lifecycle
+
+    def open(self) -> None:
+        """Take the output path, reach the viewers and open the sinks. Idempotent.
+
+        Raises:
+            OutputError: Another run writes the same path, the folder cannot be written, or a
+                viewer does not answer; nothing is left behind.
+            RecordingError: The recorder was closed.
+        """
+        if self._opened:
+            return
+        if self._closed:
+            raise RecordingError("the recorder is closed; use one Recorder per run")
+        sinks: list[Any] = []
+        try:
+            if self._output is not None:
+                self._output.open()
+                self._file_bytes = rr.binary_stream(recording=self.rec)
+                sinks.append(self._file_bytes)
+            addresses = []
+            if self.spawn:
+                addresses.append(spawn_viewer(SPAWN_PORT))
+            if self.connect is not None:
+                addresses.append(self.connect)
+            for addr in addresses:
+                self._relays.append(ViewerRelay(addr, self.recording_id))
+            if self._relays:
+                self._viewer_bytes = rr.binary_stream(recording=self.rec)
+                sinks.append(self._viewer_bytes)
+            self.rec.set_sinks(*sinks, default_blueprint=build_blueprint())
+        except BaseException:
+            self._discard()
+            raise
+        self._opened = True
 
     def __enter__(self) -> Recorder:
         return self
@@ -673,47 +720,118 @@ class Recorder:
 
     @property
     def closed(self) -> bool:
-        """True once the stream has been closed (the file is complete)."""
+        """True once the stream has been closed (the file is in place, or was not kept)."""
         return self._closed
 
     def close(self) -> None:
-        """Flush and close the stream, writing the file footer. Idempotent."""
-        if self._closed:
-            return
+        """End without a finished run: nothing is put in place (an older file is kept), the
+        viewers are let go. Idempotent; does nothing after :meth:`on_finish`."""
+        if not self._closed:
+            self._discard()
+
+    def _discard(self) -> None:
         self._closed = True
-        try:
-            if not self._failed:
-                self.rec.flush(timeout_sec=BATCH_FLUSH_TIMEOUT_S)
-        except RuntimeError:
-            pass  # a viewer that went away must not keep the file from being closed
-        finally:
+        with contextlib.suppress(RuntimeError):
             self.rec.disconnect()
+        for relay in self._relays:
+            relay.kill()
+        if self._output is not None:
+            self._output.discard()
 
-    def _abort(self) -> None:
-        """Close after a sink failed, without waiting for it again."""
-        self._failed = True
-        self.close()
+    def _flush(self, run: Simulation | None) -> None:
+        """Hand the batch's bytes to the viewers (the file's stay in memory until the end)."""
+        if self._viewer_bytes is not None:
+            try:
+                data = self._viewer_bytes.read(flush=True, flush_timeout_sec=ENCODE_TIMEOUT_S)
+            except RuntimeError as exc:  # the viewers miss this batch; the file does not
+                data = None
+                self.warnings.append(f"a batch for the viewer could not be encoded: {exc}")
+            for relay in self._relays:
+                relay.send(data or b"")
+        self._check_viewers(run)
 
-    def _flush(self) -> None:
+    def _file_failed(self, reason: str) -> None:
+        assert self.path is not None
+        self.file_error = f"cannot write the recording '{self.path}': {reason}; " + (
+            "an older file there is unchanged" if self.path.exists() else "no file was left"
+        )
+
+    def _write_file(self) -> None:
+        """Write the encoded recording to the temporary file (fsync'd on commit)."""
+        assert self._output is not None and self._file_bytes is not None
+        temp = self._output.temp
+        assert temp is not None
         try:
-            self.rec.flush(timeout_sec=BATCH_FLUSH_TIMEOUT_S)
+            data = self._file_bytes.read(flush=True, flush_timeout_sec=ENCODE_TIMEOUT_S)
         except RuntimeError as exc:
-            self._abort()
-            raise RecordingError(
-                f"cannot write the recording ({self._where}): {exc}; the recording was closed"
-            ) from exc
+            self._file_failed(f"it could not be encoded within {ENCODE_TIMEOUT_S:g} s ({exc})")
+            return
+        try:
+            with open(temp, "wb") as f:
+                f.write(data or b"")
+        except OSError as exc:
+            self._file_failed(exc.strerror or str(exc))
+
+    def _check_viewers(self, run: Simulation | None) -> None:
+        for relay in self._relays:
+            if relay.lost is not None and not any(relay.addr.url in w for w in self.warnings):
+                when = f"; noticed at t={run.ticks * run.dt:.2f} s" if run is not None else ""
+                text = (
+                    f"the viewer at {relay.addr.url} {relay.lost}{when}; streaming to it "
+                    "stopped" + (", the recording file goes on" if self._output is not None else "")
+                )
+                self.warnings.append(text)
+                relay.kill()
+                if run is not None:
+                    run.emit("viewer", text, level="warn")
+
+    def _finish(self, run: Simulation, *, interrupted: bool) -> None:
+        """Hand the rest to the viewers, write the file, close the stream, let the viewers
+        take the rest (briefly after an interrupt: whoever stops a run wants it to end), check
+        the file and put it in place."""
+        self._flush(run)
+        if self._output is not None:
+            self._write_file()
+        self._closed = True
+        with contextlib.suppress(RuntimeError):
+            self.rec.disconnect()
+        timeout = VIEWER_FINISH_AFTER_INTERRUPT_S if interrupted else FINISH_TIMEOUT_S
+        for relay in self._relays:
+            problem = relay.finish(timeout)
+            if problem is not None:
+                self.warnings.append(problem)
+        self._check_viewers(None)
+        if self._output is None:
+            return
+        temp = self._output.temp
+        if self.file_error is None and temp is not None:
+            problem = _incomplete(temp)
+            if problem is not None:
+                self._file_failed(problem)
+        if self.file_error is not None:
+            self._output.discard()
+            return
+        try:
+            self._output.commit()
+        except OutputError as exc:
+            self.file_error = str(exc)
+            return
+        self.written = self.path
 
     # ------------------------------------------------------------------ observer
 
     def on_start(self, run: Simulation) -> None:
-        """Log the static scene, plan and plot styles."""
-        if self._closed:
-            raise RecordingError("the recorder is closed; use one Recorder per run")
+        """Open (if not yet), then log the static scene, plan and plot styles."""
+        self.open()
         self._started = True
-        self._log_scene(run)
-        self._log_plan(run)
-        self._log_styles(run)
-        self._flush()
+        with deferred_interrupts():
+            self._log_scene(run)
+            self._log_plan(run)
+            self._log_styles(run)
+            for event in self._early_events:
+                self._log_event(event.tick, event.t, event.level, event.text)
+            self._early_events.clear()
+            self._flush(run)
 
     def on_ticks(self, run: Simulation, start: int, end: int) -> None:
         """Send a batch once ``flush_every`` completed ticks are waiting, or once
@@ -722,20 +840,25 @@ class Recorder:
             return
         now = time.perf_counter()
         if end - self._sent >= self.flush_every or now - self._last_send >= self.flush_interval_s:
-            self._send(run, end)
-            self._flush()
+            with deferred_interrupts():
+                self._send(run, end)
+                self._flush(run)
             self._last_send = time.perf_counter()
 
     def on_event(self, run: Simulation, event: Event) -> None:
         """Log the event at its tick (events are rare: plain ``log``)."""
         if self._closed:
             return
+        if not self._started:
+            self._early_events.append(event)  # e.g. scene warnings emitted before the run
+            return
         self._log_event(event.tick, event.t, event.level, event.text)
         if event.kind == "verdict":
             self._verdict_logged = True
 
     def on_finish(self, run: Simulation, result: RunResult) -> None:
-        """Send the rest of the log, the summary and the verdict, then close the stream."""
+        """Send the rest of the log, the summary and the verdict, close the stream and put the
+        file in place."""
         if self._closed:
             return
         try:
@@ -758,8 +881,11 @@ class Recorder:
                 level = "info" if result.success else "error"
                 self._log_event(result.ticks, result.sim_time_s, level, f"verdict: {verdict}")
                 self._verdict_logged = True
+            self._finish(run, interrupted=str(result.failure) == "interrupted")
+            self._finished = True
         finally:
-            self.close()
+            if not self._finished:
+                self._discard()
 
     # ------------------------------------------------------------------ static content
 

@@ -1,16 +1,26 @@
 """One validated run: request → scene, task, controller, observers → :class:`RunResult`.
 
-The CLI, the sweep, the benchmark and the tests all run through :func:`run`, so they validate
-inputs the same way and produce the same summaries.
+The CLI, the sweep, the benchmark and the tests all run through :func:`run` (or
+:func:`execute`, which also reports what happened to the outputs), so they validate inputs the
+same way and produce the same summaries. Everything is validated before any output is opened:
+a refused run never creates, truncates or deletes a file.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import stat
+import tempfile
 import time
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import mujoco
 
 from pickplace.controllers import CONTROLLERS, make_controller
 from pickplace.errors import InvalidInputError, UnknownNameError
@@ -28,8 +38,18 @@ from pickplace.sim import SimConfig, Simulation, TickObserver
 from pickplace.task import Task
 from pickplace.timing import TimingConfig
 from pickplace.verdict import RunResult
+from pickplace.viewer import parse_viewer_url
+
+if TYPE_CHECKING:
+    from pickplace.recording import Recorder
 
 CONTROL_RATE_RANGE_HZ = (100.0, 1000.0)
+# The physics timestep of a scene: at most one control period at the lowest rate, and not so
+# small that a run takes millions of MuJoCo steps per simulated second [s].
+MIN_TIMESTEP_S = 1e-5
+# A rate within this relative distance of an allowed one (e.g. 166.667 for 500/3 Hz) means it.
+RATE_TOLERANCE = 1e-5
+BRICK_YAW_LIMIT_RAD = 2.0 * math.pi
 PACE_RANGE = (0.01, 1000.0)
 MAX_SEED = 2**32 - 1
 
@@ -72,30 +92,147 @@ class RunRequest:
         return f"{self.scenario}/{self.controller}/seed-{self.seed}"
 
 
+_FILE_KINDS = {
+    stat.S_IFIFO: "a FIFO",
+    stat.S_IFCHR: "a character device",
+    stat.S_IFBLK: "a block device",
+    stat.S_IFSOCK: "a socket",
+}
+
+
 def validate_record_path(path: Path) -> Path:
-    """Check that ``path`` can be written as a recording.
+    """Check that ``path`` can be written as a recording, without opening or creating it.
+
+    A symbolic link is followed (the file it points at will be replaced). The folder is tried
+    with an anonymous temporary file, because ``os.access`` says yes to root even on a
+    read-only file system.
 
     Raises:
-        InvalidInputError: Wrong suffix, missing or read-only folder, or a directory.
+        InvalidInputError: Empty name, wrong suffix, a directory, a FIFO or device, a read-only
+            file, a missing or read-only folder, or a symlink into a missing folder.
     """
+    name = path.name
+    if name in ("", ".", ".."):
+        raise InvalidInputError(f"--record '{path}' names no file; give one ending in .rrd")
+    if name.lower() == ".rrd":
+        raise InvalidInputError(f"--record '{path}' has no name before .rrd; give e.g. run.rrd")
     if path.suffix != ".rrd":
         raise InvalidInputError(f"--record '{path}' must end in .rrd (e.g. run.rrd)")
-    parent = path.parent if str(path.parent) else Path(".")
+    target = path
+    if path.is_symlink():
+        target = Path(os.path.realpath(path))
+        if not target.parent.is_dir():
+            raise InvalidInputError(
+                f"--record '{path}' is a symbolic link to '{target}', whose folder does not "
+                "exist; remove the link or give another file"
+            )
+    parent = target.parent
     if not parent.is_dir():
         raise InvalidInputError(f"--record '{path}': folder '{parent}' does not exist")
-    if path.is_dir():
+    if target.is_dir():
         raise InvalidInputError(f"--record '{path}' is a directory; give a file name ending .rrd")
-    existed = path.exists()
-    try:  # os.access says yes to root even on read-only file systems: try it.
-        with open(path, "ab"):
+    try:
+        mode = target.stat().st_mode
+    except OSError:
+        mode = None
+    if mode is not None and not stat.S_ISREG(mode):
+        kind = _FILE_KINDS.get(stat.S_IFMT(mode), "not a regular file")
+        raise InvalidInputError(f"--record '{path}' is {kind}; give a regular file ending .rrd")
+    if mode is not None and not os.access(target, os.W_OK):
+        raise InvalidInputError(
+            f"--record '{path}' is read-only; make it writable or give another file"
+        )
+    try:
+        with tempfile.TemporaryFile(dir=parent):
             pass
     except OSError as exc:
         raise InvalidInputError(
             f"--record '{path}': folder '{parent}' is not writable ({exc.strerror})"
         ) from None
-    if not existed:
-        path.unlink()
     return path
+
+
+def valid_control_rates(timestep_s: float) -> list[float]:
+    """Control rates [Hz] in :data:`CONTROL_RATE_RANGE_HZ` that are a whole number of physics
+    steps of ``timestep_s`` [s]: 1 / (n · timestep) for n = 1, 2, …, fastest first."""
+    lo, hi = CONTROL_RATE_RANGE_HZ
+    n = max(1, math.ceil(1.0 / (hi * timestep_s) - 1e-9))
+    rates = []
+    while (rate := 1.0 / (n * timestep_s)) >= lo * (1 - 1e-12):
+        if rate <= hi * (1 + 1e-12):
+            rates.append(rate)
+        n += 1
+    return rates
+
+
+def check_timestep(scene_path: Path | None, timestep_s: float) -> None:
+    """Raise InvalidInputError unless the scene's physics timestep is usable.
+
+    It must be finite, at least :data:`MIN_TIMESTEP_S` and at most one control period at the
+    lowest rate (1 / 100 Hz = 0.01 s).
+    """
+    lo_rate = CONTROL_RATE_RANGE_HZ[0]
+    hi = 1.0 / lo_rate
+    if not (math.isfinite(timestep_s) and MIN_TIMESTEP_S <= timestep_s <= hi):
+        where = f"scene '{scene_path}'" if scene_path is not None else "the scene"
+        raise InvalidInputError(
+            f"{where} has physics timestep {timestep_s:g} s; it must be in "
+            f"[{MIN_TIMESTEP_S:g}, {hi:g}] s (<option timestep=...>), so that a control tick "
+            f"at {lo_rate:g} Hz is a whole number of steps"
+        )
+
+
+def resolve_control_rate(rate_hz: float, timestep_s: float) -> float:
+    """The allowed rate [Hz] that ``rate_hz`` means for this timestep (exactly 1 / (n · dt)).
+
+    Raises:
+        InvalidInputError: No whole number of physics steps gives ``rate_hz``; the message lists
+            the rates that do.
+    """
+    rates = valid_control_rates(timestep_s)
+    for rate in rates:
+        if abs(rate_hz - rate) <= RATE_TOLERANCE * rate:
+            return rate
+    lo, hi = CONTROL_RATE_RANGE_HZ
+    if not rates:
+        raise InvalidInputError(
+            f"--control-rate: this scene's physics timestep {timestep_s:g} s allows no rate in "
+            f"[{lo:g}, {hi:g}] Hz"
+        )
+    shown = ", ".join(f"{r:.6g}" for r in rates[:8]) + (", …" if len(rates) > 8 else "")
+    raise InvalidInputError(
+        f"--control-rate {rate_hz:g} Hz is not a whole number of physics steps of "
+        f"{timestep_s:g} s; valid rates in [{lo:g}, {hi:g}] Hz are {1 / timestep_s:.6g} Hz / n: "
+        f"{shown}"
+    )
+
+
+@contextlib.contextmanager
+def mujoco_warnings() -> Iterator[list[str]]:
+    """Collect MuJoCo's warnings (C and Python) instead of printing them and writing
+    ``MUJOCO_LOG.TXT`` in the working directory. Yields the list, filled on exit (distinct
+    messages, in order; a C message is dropped when a Python one says the same and more)."""
+    collected: list[str] = []
+    c_messages: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(c_messages.append)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            yield collected
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    c_texts = [" ".join(m.split()) for m in c_messages]
+    messages = []
+    for w in caught:
+        text = " ".join(str(w.message).split())
+        if any(text.startswith(c) for c in c_texts):  # the bindings' copy of a C warning
+            messages.append(text)
+        else:  # not MuJoCo's: shown as it would have been
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+    for m in messages + c_texts:
+        if m and m not in collected and not any(c.startswith(m) for c in collected):
+            collected.append(m)
 
 
 def validate_request(req: RunRequest) -> Scenario:
@@ -111,7 +248,11 @@ def validate_request(req: RunRequest) -> Scenario:
     if isinstance(req.seed, bool) or not isinstance(req.seed, int) or not 0 <= req.seed <= MAX_SEED:
         raise InvalidInputError(f"--seed must be an integer in [0, {MAX_SEED}], got {req.seed!r}")
     lo, hi = CONTROL_RATE_RANGE_HZ
-    if not (math.isfinite(req.control_rate_hz) and lo <= req.control_rate_hz <= hi):
+    if not (
+        isinstance(req.control_rate_hz, int | float)
+        and math.isfinite(req.control_rate_hz)
+        and lo <= req.control_rate_hz <= hi
+    ):
         raise InvalidInputError(
             f"--control-rate must be in [{lo:g}, {hi:g}] Hz, got {req.control_rate_hz!r}"
         )
@@ -123,13 +264,15 @@ def validate_request(req: RunRequest) -> Scenario:
         raise InvalidInputError(
             f"--brick does not apply to scenario '{scenario.name}' (it does not move the brick)"
         )
+    if req.brick is not None and not abs(req.brick.yaw) <= BRICK_YAW_LIMIT_RAD:
+        raise InvalidInputError(
+            f"--brick yaw must be in [-2π, 2π] = [{-BRICK_YAW_LIMIT_RAD:.4f}, "
+            f"{BRICK_YAW_LIMIT_RAD:.4f}] rad, got {req.brick.yaw:g}"
+        )
     if req.record is not None:
         validate_record_path(req.record)
-    if req.connect is not None and not req.connect.startswith(("rerun://", "rerun+http://")):
-        raise InvalidInputError(
-            f"--connect '{req.connect}' must be a Rerun URL such as "
-            "rerun+http://127.0.0.1:9876/proxy"
-        )
+    if req.connect is not None:
+        parse_viewer_url(req.connect)
     return scenario
 
 
@@ -143,7 +286,21 @@ def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, 
             help).
     """
     scenario = validate_request(req)
+    with mujoco_warnings() as scene_warnings:
+        scene, task, _ = _scene_and_task(req, scenario, refuse_infeasible)
+    del scene_warnings  # (only a run reports them, as events)
+    return scene, task
+
+
+def _scene_and_task(
+    req: RunRequest, scenario: Scenario, refuse_infeasible: bool
+) -> tuple[Scene, Task, float]:
+    """The scene (its timestep checked), the control rate resolved against it, and the
+    scenario's task; see :func:`build_task`."""
     scene = load_scene(req.scene_path)
+    timestep = float(scene.model.opt.timestep)
+    check_timestep(req.scene_path, timestep)
+    rate = resolve_control_rate(req.control_rate_hz, timestep)
     if req.brick is not None:
         check_brick_in_source_bin(scene, req.brick)
     task = scenario.build(
@@ -170,7 +327,7 @@ def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, 
             "lists every candidate)",
             field="brick",
         )
-    return scene, task
+    return scene, task, rate
 
 
 def plan_report(req: RunRequest) -> PlanningReport:
@@ -192,37 +349,88 @@ def plan_report(req: RunRequest) -> PlanningReport:
 
 
 def prepare(req: RunRequest) -> tuple[Scene, Task, Simulation]:
-    """Validate ``req`` and build the simulation (nothing stepped yet).
+    """Validate ``req`` and build the simulation (nothing stepped yet, no output opened: a
+    recorder among the observers opens its outputs when the run starts).
+
+    MuJoCo's warnings while compiling the scene (e.g. an attached file with another timestep)
+    become ``mujoco-warning`` events at tick 0 instead of lines on stderr.
 
     Raises:
-        PickPlaceError: Any invalid input (see :func:`build_task`).
+        PickPlaceError: Any invalid input (see :func:`validate_request`), a bad scene file or
+            timestep, a control rate that is not a whole number of physics steps, or an
+            unreachable brick pose.
     """
-    scene, task = build_task(req)
-    config = SimConfig(control_rate_hz=req.control_rate_hz)
-    dt = 1.0 / req.control_rate_hz
-    controller = make_controller(req.controller, scene, dt)
-    observers: list[TickObserver] = list(req.observers)
-    if req.pace is not None:
-        observers.append(Pacer(req.pace))
-    if req.record is not None or req.spawn or req.connect is not None:
-        from pickplace.recording import Recorder  # rerun is imported only when recording
-
-        observers.append(
-            Recorder(
-                req.record, recording_id=req.recording_id, spawn=req.spawn, connect=req.connect
-            )
-        )
-    sim = Simulation(scene, task, controller, config, observers)
+    scene, task, sim, _ = _build(req)
     return scene, task, sim
 
 
+def _build(req: RunRequest) -> tuple[Scene, Task, Simulation, Recorder | None]:
+    """:func:`prepare`, also returning the recorder it added (or None)."""
+    scenario = validate_request(req)
+    with mujoco_warnings() as scene_warnings:
+        scene, task, rate = _scene_and_task(req, scenario, refuse_infeasible=True)
+        config = SimConfig(control_rate_hz=rate)
+        controller = make_controller(req.controller, scene, 1.0 / rate)
+    observers: list[TickObserver] = list(req.observers)
+    if req.pace is not None:
+        observers.append(Pacer(req.pace))
+    recorder = None
+    if req.record is not None or req.spawn or req.connect is not None:
+        from pickplace.recording import Recorder  # rerun is imported only when recording
+
+        recorder = Recorder(
+            req.record, recording_id=req.recording_id, spawn=req.spawn, connect=req.connect
+        )
+        observers.append(recorder)
+    sim = Simulation(scene, task, controller, config, observers)
+    for text in scene_warnings:
+        sim.emit("mujoco-warning", f"MuJoCo: {text}", level="warn", tick=0)
+    return scene, task, sim, recorder
+
+
+@dataclass
+class RunOutcome:
+    """A finished run and what happened to its outputs.
+
+    Attributes:
+        result: The run's result; ``result.recording`` is the file written, or None.
+        output_error: Why the recording file could not be written (an older file at the path
+            is unchanged), or None. The CLI exits with code 3 when it is set.
+        warnings: Viewer problems; the run went on (e.g. a viewer that stopped answering).
+    """
+
+    result: RunResult
+    output_error: str | None = None
+    warnings: list[str] = field(default_factory=list)
+
+
+def execute(req: RunRequest) -> RunOutcome:
+    """Validate, build and run one simulation; report its outputs.
+
+    Raises:
+        PickPlaceError: Invalid input (nothing was opened or written).
+        OutputError: The recording path is being written by another run, or a viewer did not
+            answer (nothing was written).
+    """
+    _, _, sim, recorder = _build(req)
+    try:
+        if recorder is not None:
+            recorder.open()
+        result = sim.run()
+    finally:
+        if recorder is not None:
+            recorder.close()  # after a finished run: nothing to do; else nothing is kept
+    result.recording = None
+    if recorder is None:
+        return RunOutcome(result)
+    if recorder.written is not None:
+        result.recording = str(recorder.written)
+    return RunOutcome(result, recorder.file_error, list(recorder.warnings))
+
+
 def run(req: RunRequest) -> RunResult:
-    """Validate, build and run one simulation."""
-    _, _, sim = prepare(req)
-    result = sim.run()
-    if req.record is not None:
-        result.recording = str(req.record)
-    return result
+    """Validate, build and run one simulation (see :func:`execute` for the outputs)."""
+    return execute(req).result
 
 
 class Pacer:
@@ -248,4 +456,15 @@ class Pacer:
         return None
 
 
-__all__ = ["RunRequest", "build_task", "plan_report", "prepare", "run"]
+__all__ = [
+    "RunOutcome",
+    "RunRequest",
+    "build_task",
+    "execute",
+    "plan_report",
+    "prepare",
+    "resolve_control_rate",
+    "run",
+    "valid_control_rates",
+    "validate_record_path",
+]

@@ -210,9 +210,15 @@ class Simulation:
     # ------------------------------------------------------------------ events
 
     def emit(self, kind: str, text: str, level: str = "info", tick: int | None = None) -> None:
-        """Record an event at ``tick`` (default: the current tick)."""
+        """Record an event at ``tick`` (default: the current tick).
+
+        An event of a simulated tick is stamped with the time the tick ends, (tick + 1)·dt,
+        when its state was observed (as the tick log's rows are); one before the tick is
+        simulated (a fault acting, the plan, the verdict after the last tick) with tick·dt.
+        """
         tick = self.ticks if tick is None else tick
-        event = Event(tick=tick, t=tick * self.dt, level=level, kind=kind, text=text)
+        t = (tick + 1) * self.dt if tick < self.ticks else tick * self.dt
+        event = Event(tick=tick, t=t, level=level, kind=kind, text=text)
         self.events.append(event)
         for obs in self.observers:
             obs.on_event(self, event)
@@ -493,7 +499,13 @@ class Simulation:
         success = self.failure is None and self.ticks > 0
         if self.ticks == 0 and self.failure is None:
             self.failure = FailureReason.INTERRUPTED
-        X_WO = brick_pose(self.scene, self.data)
+        # After a non-finite state MuJoCo has reset the data: judge the rows before it.
+        bad = np.flatnonzero(self.log.nonfinite[: self.ticks] != FINITE)
+        valid = int(bad[0]) if bad.size else self.ticks
+        if valid < self.ticks:
+            X_WO = self.task.X_WO_start if valid == 0 else self.log.brick_pose(valid - 1)
+        else:
+            X_WO = brick_pose(self.scene, self.data)
         X_WO_goal = goal.X_WO_goal
         end = self.task.trajectory.end_time
         return RunResult(
@@ -504,7 +516,11 @@ class Simulation:
             success=success,
             failure=self.failure,
             failure_tick=self.failure_tick,
-            failure_time_s=None if self.failure_tick is None else self.failure_tick * self.dt,
+            failure_time_s=(
+                None
+                if self.failure_tick is None
+                else min(self.failure_tick + 1, self.ticks) * self.dt
+            ),
             ticks=self.ticks,
             sim_time_s=self.ticks * self.dt,
             wall_time_s=wall,
@@ -513,7 +529,7 @@ class Simulation:
             target_xyz=[float(x) for x in X_WO_goal.translation()] if X_WO_goal else [],
             events=self._sorted_events(),
             metrics={
-                **run_metrics(self.log, self.ticks, X_WO, X_WO_goal),
+                **run_metrics(self.log, valid, X_WO, X_WO_goal),
                 "cycle_time_s": end if self.ticks * self.dt >= end - 1e-9 else None,
             },
             plan=None if self.task.planning is None else self.task.planning.as_dict(),

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+from mink.lie import SE3, SO3
 
 from pickplace.diagnostics import holding_torques, jacobian_health_rows
 from pickplace.geometry import quaternion_angle, quaternion_step_W
@@ -174,3 +175,10 @@ class TickLog:
         mujoco.mj_kinematics(model, data)
         mujoco.mj_collision(model, data)
         return data
+
+    def brick_pose(self, k: int) -> SE3:
+        """The brick's pose X_WO at the end of tick ``k``."""
+        b = self.scene.brick_body_id
+        return SE3.from_rotation_and_translation(
+            SO3(np.array(self.body_quat[k, b])), np.array(self.body_pos[k, b])
+        )

@@ -16,6 +16,9 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "pickplace"
 MODULES = sorted(PACKAGE.rglob("*.py"))
 OWN_NAMES = ("self", "cls")
+# Public names that happen to start with an underscore: os._exit is the documented way to end a
+# process without running exit handlers.
+PUBLIC_EXCEPTIONS = {"os._exit"}
 
 
 def _is_private(name: str) -> bool:
@@ -32,7 +35,9 @@ def private_uses(source: str) -> list[str]:
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Attribute) and _is_private(node.attr):
             owner = node.value
-            if not (isinstance(owner, ast.Name) and owner.id in OWN_NAMES):
+            if isinstance(owner, ast.Name) and owner.id in OWN_NAMES:
+                continue
+            if ast.unparse(node) not in PUBLIC_EXCEPTIONS:
                 found.append((node.lineno, ast.unparse(node)))
         elif isinstance(node, ast.ImportFrom):
             for alias in node.names:

@@ -65,7 +65,7 @@ def test_no_qp_solution_and_lost_tracking_are_ik_failures(scene: Scene) -> None:
     ctx, log = _context(scene), _log(scene)
     log.ik_status[9] = IK_STATUSES.index("no-solution")
     f = QPSolutionCheck(ctx).first_failure(log, 0, 20)
-    assert f == Failure(9, FailureReason.IK_FAILED, "the QP found no solution at t=0.090 s")
+    assert f == Failure(9, FailureReason.IK_FAILED, "the QP found no solution at t=0.100 s")
     limit = ctx.criteria.tracking_limit
     log.command_error[4] = limit  # at the limit is still tracking
     log.command_error[5] = limit * 1.01
@@ -124,7 +124,7 @@ def test_a_new_check_needs_only_its_place_in_the_list(monkeypatch: pytest.Monkey
     assert failures == [
         {
             "tick": 40,
-            "t": pytest.approx(0.4),
+            "t": pytest.approx(0.41),  # the end of tick 40
             "level": "error",
             "kind": "failure",
             "text": "limit-violated: a test's own check",

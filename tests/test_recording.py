@@ -16,7 +16,7 @@ from rerun.chunk import RrdReader
 
 from pickplace.checks import FailureReason
 from pickplace.controllers import make_controller
-from pickplace.errors import InvalidInputError, RecordingError
+from pickplace.errors import InvalidInputError, OutputError, RecordingError
 from pickplace.recording import Recorder
 from pickplace.scenarios import BuildRequest, get_scenario
 from pickplace.scene import Scene, load_scene
@@ -310,9 +310,12 @@ def test_interrupt_before_the_first_tick(tmp_path: Path) -> None:
     assert "TextDocument:text" in ents["summary"].static
 
 
-def test_missing_directory_raises_recording_error(tmp_path: Path) -> None:
-    with pytest.raises(RecordingError, match="cannot open the recording sink"):
-        Recorder(tmp_path / "missing" / "run.rrd", recording_id="x")
+def test_missing_directory_raises_output_error_on_open(tmp_path: Path) -> None:
+    rec = Recorder(tmp_path / "missing" / "run.rrd", recording_id="x")  # checks no path yet
+    with pytest.raises(OutputError, match="cannot lock"):
+        rec.open()
+    assert rec.closed
+    assert not (tmp_path / "missing").exists()
 
 
 def test_a_sink_is_required_and_flush_every_is_checked(tmp_path: Path) -> None:
@@ -324,10 +327,50 @@ def test_a_sink_is_required_and_flush_every_is_checked(tmp_path: Path) -> None:
         Recorder(tmp_path / "a.rrd", recording_id="x", flush_interval_s=0.0)
 
 
-def test_close_is_idempotent(tmp_path: Path) -> None:
-    path = tmp_path / "empty.rrd"
-    rec = Recorder(path, recording_id="empty")
+def test_closed_before_the_run_finished_keeps_the_older_file(tmp_path: Path) -> None:
+    path = tmp_path / "kept.rrd"
+    path.write_bytes(b"older")
+    rec = Recorder(path, recording_id="kept")
+    rec.open()
+    rec.rec.log("summary", rr.TextDocument("not a finished run"), static=True)
     rec.close()
+    rec.close()  # idempotent
+    assert rec.closed and rec.written is None
+    assert path.read_bytes() == b"older"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.rrd"]  # no temp, no lock
+
+
+def test_a_recorder_records_one_run(tmp_path: Path) -> None:
+    rec = Recorder(tmp_path / "once.rrd", recording_id="once")
     rec.close()
-    assert rec.closed
-    assert RrdReader(path).recordings()[0].recording_id == "empty"
+    with pytest.raises(RecordingError, match="one Recorder per run"):
+        rec.open()
+
+
+def test_the_file_appears_only_when_the_run_ends(tmp_path: Path) -> None:
+    path = tmp_path / "late.rrd"
+    seen: list[bool] = []
+
+    class Watcher:
+        def on_start(self, run: Simulation) -> None:
+            seen.append(path.exists())
+
+        def on_ticks(self, run: Simulation, start: int, end: int) -> None:
+            seen.append(path.exists())
+
+        def on_event(self, run: Simulation, event: Any) -> None:
+            return None
+
+        def on_finish(self, run: Simulation, result: RunResult) -> None:
+            return None
+
+    scene = load_scene()
+    task = get_scenario("pick-place").build(BuildRequest(scene, "pick-place", 0))
+    task = dataclasses.replace(task, faults=[_CtrlC(120)])
+    recorder = Recorder(path, recording_id=RECORDING_ID)
+    Simulation(
+        scene, task, make_controller("qp", scene, 0.01), observers=[Watcher(), recorder]
+    ).run()
+    assert seen and not any(seen)
+    assert recorder.written == path
+    assert "/summary" in RrdReader(path).store().schema().entity_paths()
