@@ -5,7 +5,11 @@ Targets (figures, not tests):
 - nominal pick-and-place >= 40x real time headless, >= 30x while recording (issue 7);
 - sweep throughput with all workers >= 1.8x that with 1 worker (2 cores) (issue 7);
 - median planning time, all candidates included, <= 25 ms; nominal run >= 55x real time with
-  its planning included (issue 12).
+  its planning included (issue 12);
+- nominal cycle time <= 1.25x its joint-speed bound (each keyframe segment's largest per-joint
+  path length over speed limit, summed, plus the gripper's actions, from the run's own
+  commanded joint path), with success, slip <= 3 mm, speed ratio <= 1, tracking <= 10 mm
+  (issue 13).
 
 Usage: python scripts/bench.py [--json] [--trials N]
 """
@@ -35,6 +39,7 @@ from pickplace.runner import RunRequest, prepare
 from pickplace.scenarios import brick_on_floor, random_placement, target_placement
 from pickplace.scene import load_scene
 from pickplace.sweep import SweepRequest, run_sweep
+from pickplace.timing import cycle_time_bound
 
 TARGETS = {
     "ik_tick_ratio_vs_mink": ("<=", 0.5),
@@ -43,6 +48,10 @@ TARGETS = {
     "sweep_speedup_all_workers": (">=", 1.8),
     "planning_time_ms_median": ("<=", 25.0),
     "realtime_factor_headless_with_planning": (">=", 55.0),
+    "cycle_time_ratio_to_bound": ("<=", 1.25),
+    "nominal_max_slip_m": ("<=", 0.003),
+    "nominal_max_joint_speed_ratio": ("<=", 1.0 + 1e-6),
+    "nominal_max_position_error_m": ("<=", 0.010),
 }
 
 # Brick poses for the planning-time median: this many seeds of pick-place-random's generator.
@@ -133,6 +142,23 @@ def nominal_run(record: Path | None) -> tuple[float, float, float, Any]:
     return wall, result.sim_time_s, planning, sim
 
 
+def cycle_time(sim: Any) -> dict[str, float]:
+    """The nominal run's cycle time against its joint-speed bound, and its quality figures."""
+    log, n = sim.log, sim.ticks
+    keyframes = sim.task.trajectory.keyframes
+    bound = cycle_time_bound(keyframes, sim.dt, log.q_cmd[:n], sim.scene.v_max)
+    slip = log.slip[:n]
+    cycle = sim.task.trajectory.end_time
+    return {
+        "cycle_time_s": cycle,
+        "cycle_time_bound_s": bound,
+        "cycle_time_ratio_to_bound": cycle / bound,
+        "nominal_max_slip_m": float(np.nanmax(slip)),
+        "nominal_max_joint_speed_ratio": float(log.speed_ratio[:n].max()),
+        "nominal_max_position_error_m": float(log.position_error[:n].max()),
+    }
+
+
 def planning_times() -> dict[str, float]:
     """Median and p90 time of one planning (all candidates tried, each pre-flighted) over
     PLANNING_POSES brick poses drawn like pick-place-random's, feasible or not [ms]."""
@@ -220,6 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     states = log.q_cmd[picks - 1]
     report["realtime_factor_headless"] = statistics.median(headless)
     report["realtime_factor_headless_with_planning"] = statistics.median(with_planning)
+    report.update(cycle_time(sim))
     report["realtime_factor_recording"] = statistics.median(recording)
     report["recording_slowdown"] = (
         report["realtime_factor_headless"] / report["realtime_factor_recording"]
