@@ -246,7 +246,7 @@ def _keyframes(waypoints: Sequence[Waypoint], durations: Sequence[float]) -> lis
     for i, w in enumerate(waypoints):
         if i:
             t += durations[i - 1]
-        out.append(Keyframe(w.name, t, w.X_WG, w.gripper_width, w.stop, w.curve))
+        out.append(Keyframe(w.name, t, w.X_WG, w.gripper_width, w.stop, w.curve, w.min_duration))
     return out
 
 

@@ -21,7 +21,6 @@ wrist case. If none is feasible the report says so, with each candidate's first 
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from collections.abc import Iterator
@@ -42,8 +41,8 @@ from pickplace.timing import SegmentLimits, TimingConfig, retime
 CLEARANCE_ABOVE_WALLS = 0.125
 # The path sweep's spacing: at most this much tool travel [m] or turn [rad] between two
 # pre-flight ticks (for the collision checks and the joint path the timing works on).
-PATH_SPACING = 0.01
-PATH_ANGLE = 0.05
+PATH_SPACING = 0.02
+PATH_ANGLE = 0.1
 
 
 @dataclass(frozen=True)
@@ -164,9 +163,6 @@ class PickPlacePlanner:
             profile="linear",
             max_linear_speed=PATH_SPACING / dt,
             max_angular_speed=PATH_ANGLE / dt,
-            settle_time=dt if self.config.settle_time > 0 else 0.0,
-            close_time=dt,
-            open_time=dt,
             min_segment_duration=2 * dt,
             time_quantum=dt,
         )
@@ -214,12 +210,6 @@ class PickPlacePlanner:
         swept = self.preflight.run(path, X_WO_pick, X_WO_place)
         if not swept.feasible:
             return path, swept
-        holds = [
-            b.t - a.t
-            for a, b in itertools.pairwise(
-                self.make_plan(X_WO_pick, X_WO_place, X_OG).trajectory.keyframes
-            )
-        ]
         timing = self.timing
 
         def limits(carried: bool) -> SegmentLimits:
@@ -227,7 +217,7 @@ class PickPlacePlanner:
                 self.scene.v_max, self.scene.a_max, self.slip_accel if carried else None
             )
 
-        timed = retime(path, swept.times, swept.q, holds, limits)
+        timed = retime(path, swept.times, swept.q, limits)
         return timed, self.preflight.run(timed, X_WO_pick, X_WO_place)
 
     def make_plan(

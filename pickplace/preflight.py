@@ -159,6 +159,10 @@ class PreflightResult:
         }
 
 
+# Of two problems at the same time, the one earlier in this list is reported.
+_KIND_ORDER = ("ik", "joint-limit", "speed-limit", "singularity", "collision")
+
+
 class Preflight:
     """Runs plans through a controller and the scene's geometry without physics.
 
@@ -178,6 +182,7 @@ class Preflight:
         self.model = collision_model(scene, self.config.detection_distance)
         self.data = mujoco.MjData(self.model)
         self._names = scene.arm_joint_names
+        self._world = np.array([scene.is_world_geom(g) for g in range(self.model.ngeom)])
         lo, hi = scene.model.jnt_range[scene.finger_joint_ids].T
         self._fingers = list(
             zip(scene.finger_qpos_adr.tolist(), lo.tolist(), hi.tolist(), strict=True)
@@ -187,6 +192,10 @@ class Preflight:
         self, plan: Plan, X_WO_start: SE3, X_WO_goal: SE3 | None, stop_at_problem: bool = True
     ) -> PreflightResult:
         """Pre-flight ``plan`` from the home posture.
+
+        The IK and collision checks run tick by tick (a problem there can end the run early);
+        the joint, speed and σmin checks run on the whole joint path afterwards, vectorised;
+        the first problem in time is the plan's.
 
         Args:
             plan: The plan (its phases say when the brick is held).
@@ -204,24 +213,19 @@ class Preflight:
         command, sample = self.controller.command, traj.sample
         n = math.floor(traj.end_time / dt + 1e-9) + 1
         times = np.arange(n) * dt
-        q_path = np.zeros((n, len(sc.q_home)))
-        qdot_path = np.zeros((n, len(sc.q_home)))
-        J_path = np.zeros((n, 6, len(sc.q_home)))
+        nq = len(sc.q_home)
+        q_path, qdot_path, J_path = np.zeros((n, nq)), np.zeros((n, nq)), np.zeros((n, 6, nq))
         clear_path = np.full(n, cfg.detection_distance)
-        limits = _Limits(
-            q_lo=sc.q_min + cfg.joint_margin,
-            q_hi=sc.q_max - cfg.joint_margin,
-            v_lim=sc.v_max * (1.0 + cfg.speed_ratio_tolerance),
-            tracking_sq=cfg.tracking_tolerance**2,
-        )
-        midpoint, half_dt = cfg.midpoint_feedforward, 0.5 * dt
+        tracking_sq = cfg.tracking_tolerance**2
+        midpoint = cfg.midpoint_feedforward
         q = sc.q_home.copy()
-        found: Problem | None = None  # the first IK, joint, speed or collision problem
+        found: Problem | None = None  # the first IK or collision problem
         end = n
+        half_dt = 0.5 * dt
         for i in range(n):
             t = float(times[i])
             x, V, width = sample(t)
-            if midpoint:
+            if midpoint:  # the plan's velocity at the middle of the tick
                 V = sample(t + half_dt)[1]
             res = command(q, x, V)
             q_path[i], qdot_path[i], J_path[i] = q, res.qdot, res.J_WG
@@ -233,80 +237,55 @@ class Preflight:
             clearance, contact = self._closest(q, width, X_WO, pair_kind, is_held)
             clear_path[i] = clearance
             if found is None:
-                found = self._problem(t, q, x, res, clearance, contact, limits)
+                found = self._tick_problem(t, x, res, clearance, contact, tracking_sq)
                 if found is not None and stop_at_problem:
                     end = i + 1
                     break
             q = q + res.qdot * dt
-        # σmin of every tick in one batched SVD; a singularity before the first other problem
-        # is the plan's first problem.
-        sigma = np.linalg.svd(J_path[:end], compute_uv=False)[:, -1]
-        low = np.flatnonzero(sigma < cfg.min_singular_value)
-        problem = found
-        if low.size and (found is None or times[low[0]] < found.t):
-            k = int(low[0])
-            text = (
-                f"the tool Jacobian's smallest singular value is {sigma[k]:.4f} (below "
-                f"{cfg.min_singular_value}): near a singularity"
-            )
-            self._load_arm(q_path[k])
-            problem = Problem(float(times[k]), "singularity", text, self._tool_point())
-            end = k + 1 if stop_at_problem else end
+        problems = [
+            p for p in (found, *self._path_problems(times, q_path, qdot_path, J_path, end)) if p
+        ]
+        problem = min(problems, key=lambda p: (p.t, _KIND_ORDER.index(p.kind)), default=None)
+        if problem is not None and stop_at_problem:
+            end = min(end, round(problem.t / dt) + 1)
         q_all = q_path[:end]
         margin = np.minimum(q_all - sc.q_min, sc.q_max - q_all)
         ratio = np.abs(qdot_path[:end]) / sc.v_max
+        sigma = np.linalg.svd(J_path[:end], compute_uv=False)[:, -1]
         return PreflightResult(
             problem=problem,
             t_checked=float(times[end - 1]),
             min_clearance=float(clear_path[:end].min()),
             min_joint_margin=float(margin.min()),
             peak_speed_ratio=float(ratio.max()),
-            min_singular_value=float(sigma[:end].min()),
+            min_singular_value=float(sigma.min()),
             times=times[:end],
             q=q_all,
         )
 
-    def _problem(
+    def _tick_problem(
         self,
         t: float,
-        q: np.ndarray,
         x_plan: np.ndarray,
         res: IKResult,
         clearance: float,
         contact: tuple[str, str, tuple[float, float, float]] | None,
-        limits: _Limits,
+        tracking_sq: float,
     ) -> Problem | None:
-        """The first of the IK, joint, speed and collision problems at one tick, if any."""
-        cfg, sc = self.config, self.scene
-        p_cmd = res.x_WG[4:]
-        tool = (float(p_cmd[0]), float(p_cmd[1]), float(p_cmd[2]))
+        """The IK or collision problem at one tick, if any."""
+        cfg = self.config
+        px, py, pz = res.x_WG[4:].tolist()
         if res.status is IKStatus.NO_SOLUTION:
-            return Problem(t, "ik", "the IK finds no solution", tool)
-        e = x_plan[4:] - p_cmd
-        if float(e @ e) > limits.tracking_sq:
+            return Problem(t, "ik", "the IK finds no solution", (px, py, pz))
+        tx, ty, tz = x_plan[4:].tolist()
+        err_sq = (tx - px) ** 2 + (ty - py) ** 2 + (tz - pz) ** 2
+        if err_sq > tracking_sq:
             text = (
-                f"the commanded tool falls {math.sqrt(float(e @ e)) * 1000:.0f} mm behind the "
-                f"plan (limit {cfg.tracking_tolerance * 1000:.0f} mm; status "
-                f"{res.status.value}): unreachable or too fast"
+                f"the commanded tool falls {math.sqrt(err_sq) * 1000:.0f} mm behind the plan "
+                f"(limit {cfg.tracking_tolerance * 1000:.0f} mm; status {res.status.value}): "
+                "unreachable or too fast"
             )
-            return Problem(t, "ik", text, tool)
-        if (q < limits.q_lo).any() or (q > limits.q_hi).any():
-            below, above = q - sc.q_min, sc.q_max - q
-            j = int(np.argmin(np.minimum(below, above)))
-            side, limit = ("lower", sc.q_min[j]) if below[j] < above[j] else ("upper", sc.q_max[j])
-            text = (
-                f"{self._names[j]} at {q[j]:.3f} rad is {min(below[j], above[j]):.3f} rad from "
-                f"its {side} limit {limit:.3f} rad (margin {cfg.joint_margin} rad)"
-            )
-            return Problem(t, "joint-limit", text, self._anchor(j))
-        speed = np.abs(res.qdot)
-        if (speed > limits.v_lim).any():
-            j = int(np.argmax(speed / sc.v_max))
-            text = (
-                f"{self._names[j]} commanded at {speed[j]:.2f} rad/s, "
-                f"{speed[j] / sc.v_max[j]:.2f}x its limit {sc.v_max[j]:.2f} rad/s"
-            )
-            return Problem(t, "speed-limit", text, self._anchor(j))
+            return Problem(t, "ik", text, (px, py, pz))
         if contact is not None and clearance < cfg.clearance:
             a, b, pos = contact
             text = (
@@ -316,7 +295,61 @@ class Preflight:
             return Problem(t, "collision", text, pos)
         return None
 
+    def _path_problems(
+        self,
+        times: np.ndarray,
+        q: np.ndarray,
+        qdot: np.ndarray,
+        J: np.ndarray,
+        end: int,
+    ) -> list[Problem]:
+        """The first joint-limit, speed-limit and singularity problems on ticks [0, end)."""
+        cfg, sc = self.config, self.scene
+        q, qdot = q[:end], qdot[:end]
+        out: list[Problem] = []
+        below, above = q - sc.q_min, sc.q_max - q
+        margin = np.minimum(below, above)
+        bad = np.flatnonzero(margin.min(axis=1) < cfg.joint_margin)
+        if bad.size:
+            k = int(bad[0])
+            j = int(np.argmin(margin[k]))
+            side, limit = (
+                ("lower", sc.q_min[j]) if below[k, j] < above[k, j] else ("upper", sc.q_max[j])
+            )
+            text = (
+                f"{self._names[j]} at {q[k, j]:.3f} rad is {margin[k, j]:.3f} rad from its "
+                f"{side} limit {limit:.3f} rad (margin {cfg.joint_margin} rad)"
+            )
+            out.append(Problem(float(times[k]), "joint-limit", text, self._anchor_at(q[k], j)))
+        ratio = np.abs(qdot) / sc.v_max
+        bad = np.flatnonzero(ratio.max(axis=1) > 1.0 + cfg.speed_ratio_tolerance)
+        if bad.size:
+            k = int(bad[0])
+            j = int(np.argmax(ratio[k]))
+            text = (
+                f"{self._names[j]} commanded at {abs(qdot[k, j]):.2f} rad/s, "
+                f"{ratio[k, j]:.2f}x its limit {sc.v_max[j]:.2f} rad/s"
+            )
+            out.append(Problem(float(times[k]), "speed-limit", text, self._anchor_at(q[k], j)))
+        sigma = np.linalg.svd(J[:end], compute_uv=False)[:, -1]
+        bad = np.flatnonzero(sigma < cfg.min_singular_value)
+        if bad.size:
+            k = int(bad[0])
+            text = (
+                f"the tool Jacobian's smallest singular value is {sigma[k]:.4f} (below "
+                f"{cfg.min_singular_value}): near a singularity"
+            )
+            self._load_arm(q[k])
+            out.append(Problem(float(times[k]), "singularity", text, self._tool_point()))
+        return out
+
     # ------------------------------------------------------------------ geometry
+
+    def _anchor_at(self, q: np.ndarray, j: int) -> tuple[float, float, float]:
+        """World position of arm joint ``j``'s anchor with the arm at ``q``."""
+        self._load_arm(q)
+        p = self.data.xanchor[self.scene.arm_joint_ids[j]]
+        return (float(p[0]), float(p[1]), float(p[2]))
 
     def _load_arm(self, q: np.ndarray) -> None:
         """Arm at ``q``: kinematics only."""
@@ -337,11 +370,6 @@ class Preflight:
         sc.set_brick_pose(d, X_WO)
         mujoco.mj_kinematics(m, d)
         mujoco.mj_collision(m, d)
-
-    def _anchor(self, j: int) -> tuple[float, float, float]:
-        """World position of arm joint ``j``'s anchor (kinematics loaded by :meth:`_closest`)."""
-        p = self.data.xanchor[self.scene.arm_joint_ids[j]]
-        return (float(p[0]), float(p[1]), float(p[2]))
 
     def _pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
         """Per geom pair: 1 robot-world, 2 brick-world (not a geom it rests on at the start or
@@ -383,7 +411,7 @@ class Preflight:
         dist = contact.dist[:n]
         k = int(np.flatnonzero(mask)[np.argmin(dist[mask])])
         a, b = int(g1[k]), int(g2[k])
-        if sc.is_world_geom(a):
+        if self._world[a]:
             a, b = b, a
         pos = contact.pos[k]
         return float(dist[k]), (
@@ -391,16 +419,6 @@ class Preflight:
             sc.geom_name(b),
             (float(pos[0]), float(pos[1]), float(pos[2])),
         )
-
-
-@dataclass(frozen=True)
-class _Limits:
-    """Per-tick thresholds of :meth:`Preflight._problem`, precomputed per run."""
-
-    q_lo: np.ndarray
-    q_hi: np.ndarray
-    v_lim: np.ndarray
-    tracking_sq: float
 
 
 def collision_model(scene: Scene, detection_distance: float) -> mujoco.MjModel:

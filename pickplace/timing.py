@@ -403,11 +403,10 @@ def retime(
     path_plan: Plan,
     times: np.ndarray,
     q: np.ndarray,
-    holds: Sequence[float],
     limits: Callable[[bool], SegmentLimits],
 ) -> Plan:
     """The plan's path, timed by the robot: each motion time-optimally along the joint path
-    the pre-flight found, each in-place segment (a gripper action) for its hold time.
+    the pre-flight found, each in-place segment (a gripper action) for its keyframe's hold.
 
     A motion runs from one stop to the next: consecutive moving segments joined at keyframes
     the tool passes through are timed as one path (the path parameter is the segments' chord
@@ -418,7 +417,6 @@ def retime(
             each segment traversed at constant parameter speed.
         times: The pre-flight's tick times [s] (n,), uniform.
         q: The joint path at those times [rad] (n, joints).
-        holds: Per segment, the duration of an in-place segment [s] (ignored for motions).
         limits: The limits of a motion, given whether the brick is carried in it.
 
     Returns:
@@ -431,8 +429,6 @@ def retime(
     keyframes = path_plan.trajectory.keyframes
     sample = path_plan.trajectory.sample
     n_seg = len(keyframes) - 1
-    if len(holds) != n_seg:
-        raise PlanError(f"holds must have one entry per segment, got {len(holds)}")
     if len(times) < 2:
         raise PlanError("the pre-flight's joint path has fewer than 2 ticks")
     dt = float(times[1] - times[0])
@@ -446,7 +442,7 @@ def retime(
     i = 0
     while i < n_seg:
         if not _moves(keyframes[i], keyframes[i + 1]):
-            durations[i] = holds[i]
+            durations[i] = keyframes[i + 1].hold
             i += 1
             continue
         j = i  # the motion: segments i..j, joined at keyframes the tool passes through
@@ -482,7 +478,7 @@ def retime(
     new_times = [0.0, *itertools.accumulate(durations)]
     old_times = [k.t for k in keyframes]
     retimed = [
-        Keyframe(k.name, t, k.X_WG, k.gripper_width, k.stop, k.curve)
+        Keyframe(k.name, t, k.X_WG, k.gripper_width, k.stop, k.curve, k.hold)
         for k, t in zip(keyframes, new_times, strict=True)
     ]
 

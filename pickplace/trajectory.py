@@ -157,6 +157,8 @@ class Keyframe:
             continuous (a via point).
         curve: The segment that ends here is a smooth curve (a cubic Hermite that leaves and
             reaches pass-through keyframes along their path tangent), not a straight line.
+        hold: The least time the segment ending here must last [s], e.g. the gripper's own
+            time to close in place (0: as fast as the motion allows).
     """
 
     name: str
@@ -165,6 +167,7 @@ class Keyframe:
     gripper_width: float
     stop: bool = True
     curve: bool = False
+    hold: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate and normalise the fields; raise PlanError naming the bad field."""
@@ -180,6 +183,10 @@ class Keyframe:
         if width < 0.0:
             raise PlanError(f"{label} gripper_width [m] must be >= 0, got {self.gripper_width!r}")
         object.__setattr__(self, "gripper_width", width)
+        hold = require_finite(f"{label} hold [s]", self.hold, PlanError)
+        if hold < 0.0:
+            raise PlanError(f"{label} hold [s] must be >= 0, got {self.hold!r}")
+        object.__setattr__(self, "hold", hold)
 
 
 def validate_keyframes(keyframes: Sequence[Keyframe]) -> None:
@@ -292,7 +299,11 @@ def _curve(
     length = float(np.linalg.norm(dp))
     m0 = t_a * length if (curved and t_a is not None) else dp
     m1 = t_b * length if (curved and t_b is not None) else dp
-    return (_xyz(p1), _xyz(m0), _xyz(m1), rates)
+    # p(u) = A u³ + B u² + C u + D and g(u) = a u³ + b u² + r0 u (g(0) = 0, g(1) = 1).
+    A = 2 * p0 + m0 - 2 * p1 + m1
+    B = -3 * p0 - 2 * m0 + 3 * p1 - m1
+    r0, r1 = rates
+    return (_xyz(A), _xyz(B), _xyz(m0), _xyz(p0), (r0 + r1 - 2.0, 3.0 - 2.0 * r0 - r1, r0))
 
 
 def _xyz(v: FloatArray) -> tuple[float, float, float]:
@@ -316,9 +327,9 @@ class _Segment:
         p0_xyz: Position at the start [m].
         dp_xyz: Position change over the segment [m].
         omega_dir_W_xyz: R0 φ: the world-frame rotation vector of the segment [rad].
-        curve: For a curved segment, (p1, m0, m1, (r0, r1)): the end position, the Hermite
-            tangents at both ends [m] and the slopes of the rotation's progress g(u) at both
-            ends [-]; None for a straight line with g(u) = u.
+        curve: For a curved segment, the cubic coefficients of its position p(u) = A u³ + B u²
+            + C u + D, as (A, B, C, D) [m], and of the rotation's progress g(u) = a u³ + b u² +
+            c u, as (a, b, c) [-]; None for a straight line with g(u) = u.
     """
 
     t0: float
@@ -455,24 +466,21 @@ class PoseTrajectory:
             if seg.curve is None:
                 out.append((float(np.linalg.norm(seg.dp_xyz)), 0.0, angle, 0.0))
                 continue
-            p1, m0, m1, (r0, r1) = (np.asarray(x, dtype=np.float64) for x in seg.curve)
-            p0 = np.asarray(seg.p0_xyz)
-            # p'(u) = A u² + B u + C, p''(u) = 2 A u + B (Hermite derivative coefficients).
-            A = 6 * p0 + 3 * m0 - 6 * p1 + 3 * m1
-            B = -6 * p0 - 4 * m0 + 6 * p1 - 2 * m1
-            C = m0
+            c3, c2, c1, _ = (np.asarray(x, dtype=np.float64) for x in seg.curve[:4])
+            ga, gb, gc = seg.curve[4]
+            # p'(u) = 3 c3 u² + 2 c2 u + c1; p''(u) = 6 c3 u + 2 c2.
+            A, B, C = 3 * c3, 2 * c2, c1
             # d/du |p'|² / 2 = p'·p'' = 2A·A u³ + 3A·B u² + (B·B + 2A·C) u + B·C.
             roots = np.roots([2 * A @ A, 3 * A @ B, B @ B + 2 * A @ C, B @ C])
-            us = [0.0, 1.0] + [
-                float(r.real) for r in roots if abs(r.imag) < 1e-12 and 0 < r.real < 1
-            ]
+            us = [0.0, 1.0]
+            us += [float(r.real) for r in roots if abs(r.imag) < 1e-12 and 0 < r.real < 1]
             speed = max(float(np.linalg.norm(A * u * u + B * u + C)) for u in us)
             accel = max(float(np.linalg.norm(2 * A * u + B)) for u in (0.0, 1.0))
-            # g'(u) = a u² + b u + r0 with a = 3 r0 + 3 r1 − 6, b = −4 r0 − 2 r1 + 6.
-            ga, gb = 3 * r0 + 3 * r1 - 6, -4 * r0 - 2 * r1 + 6
-            gus = [0.0, 1.0] + ([-gb / (2 * ga)] if ga and 0 < -gb / (2 * ga) < 1 else [])
-            rate = max(abs(ga * u * u + gb * u + r0) for u in gus)
-            rate_dot = max(abs(2 * ga * u + gb) for u in (0.0, 1.0))
+            # g'(u) = 3 ga u² + 2 gb u + gc, g''(u) = 6 ga u + 2 gb.
+            qa, qb = 3 * ga, 2 * gb
+            gus = [0.0, 1.0] + ([-qb / (2 * qa)] if qa and 0 < -qb / (2 * qa) < 1 else [])
+            rate = max(abs(qa * u * u + qb * u + gc) for u in gus)
+            rate_dot = max(abs(2 * qa * u + qb) for u in (0.0, 1.0))
             out.append((speed, accel, angle * float(rate), angle * float(rate_dot)))
         return out
 
@@ -552,15 +560,20 @@ class PoseTrajectory:
         t: float,
     ) -> tuple[FloatArray, FloatArray, float]:
         """:meth:`sample` on a curved segment: cubic Hermite position, rotation progress g(s)."""
-        p1, m0, m1, (r0, r1) = curve
-        s2, s3 = s * s, s * s * s
-        h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
-        d00, d10, d01, d11 = 6 * s2 - 6 * s, 3 * s2 - 4 * s + 1, -6 * s2 + 6 * s, 3 * s2 - 2 * s
-        p0 = seg.p0_xyz
-        pos = [h00 * p0[c] + h10 * m0[c] + h01 * p1[c] + h11 * m1[c] for c in range(3)]
-        dpos = [d00 * p0[c] + d10 * m0[c] + d01 * p1[c] + d11 * m1[c] for c in range(3)]
-        g = h10 * r0 + h01 + h11 * r1
-        dg = d10 * r0 + d01 + d11 * r1
+        (ax, ay, az), (bx, by, bz), (cx, cy, cz), (dx, dy, dz), (ga, gb, gc) = curve
+        pos = (
+            ((ax * s + bx) * s + cx) * s + dx,
+            ((ay * s + by) * s + cy) * s + dy,
+            ((az * s + bz) * s + cz) * s + dz,
+        )
+        s3 = 3.0 * s
+        dpos = (
+            (ax * s3 + 2.0 * bx) * s + cx,
+            (ay * s3 + 2.0 * by) * s + cy,
+            (az * s3 + 2.0 * bz) * s + cz,
+        )
+        g = ((ga * s + gb) * s + gc) * s
+        dg = (ga * s3 + 2.0 * gb) * s + gc
         quat = seg.q0.copy()
         mujoco.mju_quatIntegrate(quat, seg.phi, g)
         x_WG = np.array((*quat.tolist(), *pos))
