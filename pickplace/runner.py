@@ -113,41 +113,56 @@ def validate_record_path(path: Path) -> Path:
     """
     name = path.name
     if name in ("", ".", ".."):
-        raise InvalidInputError(f"--record '{path}' names no file; give one ending in .rrd")
+        raise InvalidInputError(
+            f"recording file '{path}' names no file; give one ending in .rrd", field="record"
+        )
     if name.lower() == ".rrd":
-        raise InvalidInputError(f"--record '{path}' has no name before .rrd; give e.g. run.rrd")
+        raise InvalidInputError(
+            f"recording file '{path}' has no name before .rrd; give e.g. run.rrd", field="record"
+        )
     if path.suffix != ".rrd":
-        raise InvalidInputError(f"--record '{path}' must end in .rrd (e.g. run.rrd)")
+        raise InvalidInputError(
+            f"recording file '{path}' must end in .rrd (e.g. run.rrd)", field="record"
+        )
     target = path
     if path.is_symlink():
         target = Path(os.path.realpath(path))
         if not target.parent.is_dir():
             raise InvalidInputError(
-                f"--record '{path}' is a symbolic link to '{target}', whose folder does not "
-                "exist; remove the link or give another file"
+                f"recording file '{path}' is a symbolic link to '{target}', whose folder does not "
+                "exist; remove the link or give another file",
+                field="record",
             )
     parent = target.parent
     if not parent.is_dir():
-        raise InvalidInputError(f"--record '{path}': folder '{parent}' does not exist")
+        raise InvalidInputError(
+            f"recording file '{path}': folder '{parent}' does not exist", field="record"
+        )
     if target.is_dir():
-        raise InvalidInputError(f"--record '{path}' is a directory; give a file name ending .rrd")
+        raise InvalidInputError(
+            f"recording file '{path}' is a directory; give a file name ending .rrd", field="record"
+        )
     try:
         mode = target.stat().st_mode
     except OSError:
         mode = None
     if mode is not None and not stat.S_ISREG(mode):
         kind = _FILE_KINDS.get(stat.S_IFMT(mode), "not a regular file")
-        raise InvalidInputError(f"--record '{path}' is {kind}; give a regular file ending .rrd")
+        raise InvalidInputError(
+            f"recording file '{path}' is {kind}; give a regular file ending .rrd", field="record"
+        )
     if mode is not None and not os.access(target, os.W_OK):
         raise InvalidInputError(
-            f"--record '{path}' is read-only; make it writable or give another file"
+            f"recording file '{path}' is read-only; make it writable or give another file",
+            field="record",
         )
     try:
         with tempfile.TemporaryFile(dir=parent):
             pass
     except OSError as exc:
         raise InvalidInputError(
-            f"--record '{path}': folder '{parent}' is not writable ({exc.strerror})"
+            f"recording file '{path}': folder '{parent}' is not writable ({exc.strerror})",
+            field="record",
         ) from None
     return path
 
@@ -196,14 +211,16 @@ def resolve_control_rate(rate_hz: float, timestep_s: float) -> float:
     lo, hi = CONTROL_RATE_RANGE_HZ
     if not rates:
         raise InvalidInputError(
-            f"--control-rate: this scene's physics timestep {timestep_s:g} s allows no rate in "
-            f"[{lo:g}, {hi:g}] Hz"
+            f"this scene's physics timestep {timestep_s:g} s allows no control rate in "
+            f"[{lo:g}, {hi:g}] Hz",
+            field="control_rate_hz",
         )
     shown = ", ".join(f"{r:.6g}" for r in rates[:8]) + (", …" if len(rates) > 8 else "")
     raise InvalidInputError(
-        f"--control-rate {rate_hz:g} Hz is not a whole number of physics steps of "
+        f"control rate {rate_hz:g} Hz is not a whole number of physics steps of "
         f"{timestep_s:g} s; valid rates in [{lo:g}, {hi:g}] Hz are {1 / timestep_s:.6g} Hz / n: "
-        f"{shown}"
+        f"{shown}",
+        field="control_rate_hz",
     )
 
 
@@ -246,7 +263,9 @@ def validate_request(req: RunRequest) -> Scenario:
     if req.controller not in CONTROLLERS:
         raise UnknownNameError("controller", req.controller, CONTROLLERS)
     if isinstance(req.seed, bool) or not isinstance(req.seed, int) or not 0 <= req.seed <= MAX_SEED:
-        raise InvalidInputError(f"--seed must be an integer in [0, {MAX_SEED}], got {req.seed!r}")
+        raise InvalidInputError(
+            f"seed must be an integer in [0, {MAX_SEED}], got {req.seed!r}", field="seed"
+        )
     lo, hi = CONTROL_RATE_RANGE_HZ
     if not (
         isinstance(req.control_rate_hz, int | float)
@@ -254,20 +273,27 @@ def validate_request(req: RunRequest) -> Scenario:
         and lo <= req.control_rate_hz <= hi
     ):
         raise InvalidInputError(
-            f"--control-rate must be in [{lo:g}, {hi:g}] Hz, got {req.control_rate_hz!r}"
+            f"control rate must be in [{lo:g}, {hi:g}] Hz, got {req.control_rate_hz!r}",
+            field="control_rate_hz",
         )
     if req.pace is not None:
         lo, hi = PACE_RANGE
         if not (math.isfinite(req.pace) and lo <= req.pace <= hi):
-            raise InvalidInputError(f"--pace must be in [{lo:g}, {hi:g}], got {req.pace!r}")
+            raise InvalidInputError(
+                f"pace must be in [{lo:g}, {hi:g}] times real time, got {req.pace!r}",
+                field="pace",
+            )
     if req.brick is not None and not scenario.uses_brick:
         raise InvalidInputError(
-            f"--brick does not apply to scenario '{scenario.name}' (it does not move the brick)"
+            f"a brick pose does not apply to scenario '{scenario.name}' (it does not move the "
+            "brick)",
+            field="brick",
         )
     if req.brick is not None and not abs(req.brick.yaw) <= BRICK_YAW_LIMIT_RAD:
         raise InvalidInputError(
-            f"--brick yaw must be in [-2π, 2π] = [{-BRICK_YAW_LIMIT_RAD:.4f}, "
-            f"{BRICK_YAW_LIMIT_RAD:.4f}] rad, got {req.brick.yaw:g}"
+            f"brick yaw must be in [-2π, 2π] = [{-BRICK_YAW_LIMIT_RAD:.4f}, "
+            f"{BRICK_YAW_LIMIT_RAD:.4f}] rad, got {req.brick.yaw:g}",
+            field="brick",
         )
     if req.record is not None:
         validate_record_path(req.record)

@@ -178,8 +178,11 @@ class _Worker:
         self.give(seed)
 
     def give(self, seed: int | None) -> None:
+        """Hand the worker its next seed (None: stop). A worker that died meanwhile cannot
+        take it; its sentinel reports it, and the seed counts as its lost trial."""
         self.seed = seed
-        self.conn.send(seed)
+        with contextlib.suppress(BrokenPipeError, OSError):
+            self.conn.send(seed)
 
     def kill(self) -> None:
         with contextlib.suppress(OSError, AttributeError):

@@ -92,19 +92,21 @@ def parse_viewer_url(url: str) -> ViewerAddress:
     Raises:
         InvalidInputError: The URL is not of that form (the message shows one that is).
     """
-    bad = f"--connect '{url}' must be a Rerun viewer URL such as {URL_EXAMPLE}"
+    bad = f"viewer URL '{url}' must be a Rerun viewer URL such as {URL_EXAMPLE}"
     try:
         parts = urlsplit(url)
         port = parts.port
     except ValueError:
-        raise InvalidInputError(f"{bad} (its port is not a number in [1, 65535])") from None
+        raise InvalidInputError(
+            f"{bad} (its port is not a number in [1, 65535])", field="connect"
+        ) from None
     if parts.scheme not in SCHEMES:
         valid = ", ".join(f"{s}://" for s in SCHEMES)
-        raise InvalidInputError(f"{bad}; the scheme must be one of {valid}")
+        raise InvalidInputError(f"{bad}; the scheme must be one of {valid}", field="connect")
     if not parts.hostname:
-        raise InvalidInputError(f"{bad}; it names no host")
+        raise InvalidInputError(f"{bad}; it names no host", field="connect")
     if parts.path != "/proxy" or parts.query or parts.fragment:
-        raise InvalidInputError(f"{bad}; the path must be /proxy")
+        raise InvalidInputError(f"{bad}; the path must be /proxy", field="connect")
     tls = SCHEMES[parts.scheme]
     return ViewerAddress(url, parts.hostname, port or (443 if tls else 80), tls)
 

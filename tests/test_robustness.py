@@ -672,7 +672,7 @@ def test_10_huge_yaw_is_named() -> None:
     code, _, err = finish(cli("run", "--brick=0,-0.55,1e300"))
     assert code == 2
     (line,) = clean_stderr(err)
-    assert "--brick yaw must be in [-2π, 2π]" in line
+    assert "--brick: brick yaw must be in [-2π, 2π]" in line
 
 
 def test_10_version_and_sweep_help() -> None:
