@@ -7,6 +7,7 @@ acceleration limits of :class:`PlanConfig`; the gripper stops at every keyframe.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Sequence
@@ -37,7 +38,8 @@ class PlanConfig:
         close_time: Duration of closing the gripper, at rest [s].
         open_time: Duration of opening the gripper, at rest [s].
         settle_time: Rest at the pick pose before closing [s]; 0 omits the "settle" keyframe.
-        open_width: Commanded finger gap when open [m].
+        open_width: Commanded finger gap when open [m], at most: the planner opens a
+            gripper that opens less as wide as it opens (:func:`open_width_for`).
         closed_width: Commanded finger gap when closed [m]; the brick stops the fingers.
         min_segment_duration: Lower bound of every segment duration [s].
         profile: Motion profile name: "sine", "minimum-jerk" or "linear" (tests only).
@@ -82,6 +84,15 @@ class PlanConfig:
 
 
 DEFAULT_PLAN_CONFIG = PlanConfig()
+
+
+def open_width_for(config: PlanConfig, gripper_open_width: float) -> PlanConfig:
+    """``config`` with its open width capped at what the gripper opens to [m].
+
+    Raises:
+        PlanError: The gripper does not open wider than ``config.closed_width``.
+    """
+    return dataclasses.replace(config, open_width=min(config.open_width, gripper_open_width))
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from mink.lie import SE3, SO3
 
 from pickplace.grasp import brick_width_across, top_down_grasps, yaw_of
 from pickplace.kinematics import ArmKinematics
-from pickplace.plan import Plan, PlanConfig, plan_pick_place, swung_pose
+from pickplace.plan import Plan, PlanConfig, open_width_for, plan_pick_place, swung_pose
 from pickplace.preflight import Preflight, PreflightConfig, PreflightResult
 from pickplace.scene import Scene
 
@@ -134,7 +134,8 @@ class PickPlacePlanner:
     Args:
         scene: The scene (bins, brick, arm, gripper).
         controller: Name of the run's controller, which the pre-flight runs.
-        config: Planning limits and parameters.
+        config: Planning limits and parameters; the open width is capped at the gripper's
+            (:func:`~pickplace.plan.open_width_for`).
         preflight: Pre-flight rate and thresholds.
     """
 
@@ -146,7 +147,7 @@ class PickPlacePlanner:
         preflight: PreflightConfig | None = None,
     ) -> None:
         self.scene = scene
-        self.config = config or PlanConfig()
+        self.config = open_width_for(config or PlanConfig(), scene.gripper_open_width)
         self.preflight = Preflight(scene, controller, preflight)
         kin = ArmKinematics(scene)
         kin.update(scene.q_home)

@@ -14,8 +14,10 @@ from pathlib import Path
 
 from pickplace.controllers import CONTROLLERS, make_controller
 from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.loader import load_scene
 from pickplace.planner import Candidate, PlanningReport
 from pickplace.preflight import Preflight, PreflightConfig
+from pickplace.robot import DEFAULT_ROBOT
 from pickplace.scenarios import (
     BrickPlacement,
     BuildRequest,
@@ -23,7 +25,7 @@ from pickplace.scenarios import (
     check_brick_in_source_bin,
     get_scenario,
 )
-from pickplace.scene import Scene, load_scene
+from pickplace.scene import Scene
 from pickplace.sim import SimConfig, Simulation, TickObserver
 from pickplace.task import Task
 from pickplace.verdict import RunResult
@@ -42,7 +44,9 @@ class RunRequest:
         controller: Controller name.
         seed: Seed of randomised scenarios (≥ 0).
         brick: Brick start pose override (x, y [m], yaw [rad]) in bin 1.
-        scene_path: Scene file; default ``scenes/scene.xml``.
+        scene_path: World file (bins, brick, floor, lights, cameras, physics options) the
+            robot is composed into; default ``scenes/world.xml``.
+        robot: A bundled robot's name or a ``robot.toml`` path.
         record: ``.rrd`` file to write.
         spawn: Stream to a newly spawned Rerun viewer.
         connect: Stream to a running Rerun viewer at this URL.
@@ -55,6 +59,7 @@ class RunRequest:
     seed: int = 0
     brick: BrickPlacement | None = None
     scene_path: Path | None = None
+    robot: str = DEFAULT_ROBOT
     record: Path | None = None
     spawn: bool = False
     connect: str | None = None
@@ -133,13 +138,15 @@ def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, 
     """Validate ``req``, load the scene and build the scenario's task (planning included).
 
     Raises:
-        PickPlaceError: Any invalid input (see :func:`validate_request`) or a bad scene file;
+        PickPlaceError: Any invalid input (see :func:`validate_request`), a bad world file or
+            robot description (:class:`~pickplace.errors.RobotError`: the file, the field and
+            what would be valid);
             a ``--brick`` pose outside bin 1, or one for which no candidate plan is feasible
             (field ``brick``: the message gives the first candidate's problem and what would
             help).
     """
     scenario = validate_request(req)
-    scene = load_scene(req.scene_path)
+    scene = load_scene(req.scene_path, req.robot)
     if req.brick is not None:
         check_brick_in_source_bin(scene, req.brick)
     task = scenario.build(

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from pickplace.errors import InvalidInputError
+from pickplace.robot import DEFAULT_ROBOT, resolve_description
 from pickplace.runner import MAX_SEED, RunRequest, run, validate_request
 
 MAX_TRIALS = 100_000
@@ -25,17 +26,19 @@ MAX_TRIALS = 100_000
 @dataclass(frozen=True)
 class SweepRequest:
     """A sweep: ``trials`` runs of ``scenario`` with seeds ``first_seed …`` on ``workers``
-    processes (default: one per CPU)."""
+    processes (default: one per CPU), with ``robot`` (a bundled name or a robot.toml)."""
 
     scenario: str = "pick-place-random"
     controller: str = "qp"
     trials: int = 20
     first_seed: int = 0
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    robot: str = DEFAULT_ROBOT
 
     def validate(self) -> None:
-        """Raise InvalidInputError / UnknownNameError for an invalid sweep."""
+        """Raise InvalidInputError / UnknownNameError / RobotError for an invalid sweep."""
         validate_request(RunRequest(self.scenario, self.controller, self.first_seed))
+        resolve_description(self.robot)
         if not 1 <= self.trials <= MAX_TRIALS:
             raise InvalidInputError(f"--trials must be in [1, {MAX_TRIALS}], got {self.trials}")
         if self.first_seed + self.trials - 1 > MAX_SEED:
@@ -48,14 +51,17 @@ class SweepRequest:
             )
 
 
-def run_trial(scenario: str, controller: str, seed: int) -> dict[str, Any]:
+def run_trial(
+    scenario: str, controller: str, seed: int, robot: str = DEFAULT_ROBOT
+) -> dict[str, Any]:
     """Run one trial and return its summary without the event list."""
-    summary = run(RunRequest(scenario=scenario, controller=controller, seed=seed)).summary()
+    req = RunRequest(scenario=scenario, controller=controller, seed=seed, robot=robot)
+    summary = run(req).summary()
     summary.pop("events", None)
     return summary
 
 
-def _trial(args: tuple[str, str, int]) -> dict[str, Any]:
+def _trial(args: tuple[str, str, int, str]) -> dict[str, Any]:
     return run_trial(*args)
 
 
@@ -64,7 +70,9 @@ def run_sweep(
 ) -> dict[str, Any]:
     """Run every trial of ``req`` and return the report (JSON-serialisable)."""
     req.validate()
-    jobs = [(req.scenario, req.controller, req.first_seed + i) for i in range(req.trials)]
+    jobs = [
+        (req.scenario, req.controller, req.first_seed + i, req.robot) for i in range(req.trials)
+    ]
     wall0 = time.perf_counter()
     results: list[dict[str, Any]] = []
     if req.workers == 1:
@@ -93,6 +101,7 @@ def sweep_report(req: SweepRequest, results: list[dict[str, Any]], wall: float) 
     errors = np.array([r["place_error_m"] for r in ok if r["place_error_m"] is not None])
     return {
         "scenario": req.scenario,
+        "robot": results[0]["robot"] if results else None,
         "controller": req.controller,
         "trials": req.trials,
         "first_seed": req.first_seed,
