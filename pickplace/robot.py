@@ -320,12 +320,19 @@ def compose(
 # --------------------------------------------------------------------------- the result
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of (..., 3) arrays by components (a tenth of its cost on small stacks)."""
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
+
+
 def _rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``v`` (..., 3) by unit quaternions ``quat`` (..., 4, wxyz)."""
     w = quat[..., :1]
     u = quat[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    t = 2.0 * _cross(u, v)
+    return v + w * t + _cross(u, t)
 
 
 @dataclass(frozen=True)
@@ -455,23 +462,29 @@ class Robot:
         gap ``width`` [m] (clipped to the calibrated range): what a kinematic copy sets."""
         return self.calibration.qpos_for_width(width)
 
-    def gap_from_body_poses(self, body_pos: np.ndarray, body_quat: np.ndarray) -> np.ndarray:
+    def gap_from_body_poses(
+        self, body_pos: np.ndarray, body_quat: np.ndarray, y_W: np.ndarray | None = None
+    ) -> np.ndarray:
         """Pad gap [m] from body poses, vectorised over leading axes.
 
         Args:
             body_pos: Body positions in world, shape (..., nbody, 3) (``data.xpos``).
             body_quat: Body orientations wxyz, shape (..., nbody, 4) (``data.xquat``).
+            y_W: The tool's y axis in world, shape (..., 3), if known (the tool site's rotation
+                matrix's second column); else computed from the tool body's orientation.
 
         Returns:
             Shape (...): the innermost +y pad face minus the innermost -y pad face, along the
             tool's y axis.
         """
-        y_W = _rotate(body_quat[..., self.tool_body_id, :], self.y_tool_body)
-        sides = []
-        for bodies, faces in zip(self.pad_body_ids, self.pad_faces_body, strict=True):
-            p = body_pos[..., bodies, :] + _rotate(body_quat[..., bodies, :], faces)
-            sides.append(np.einsum("...ki,...i->...k", p, y_W))
-        return sides[0].min(axis=-1) - sides[1].max(axis=-1)
+        if y_W is None:
+            y_W = _rotate(body_quat[..., self.tool_body_id, :], self.y_tool_body)
+        bodies = np.concatenate(self.pad_body_ids)
+        faces = np.concatenate(self.pad_faces_body)
+        p = body_pos[..., bodies, :] + _rotate(body_quat[..., bodies, :], faces)  # both sides
+        along = np.einsum("...ki,...i->...k", p, y_W)
+        k = len(self.pad_body_ids[0])
+        return along[..., :k].min(axis=-1) - along[..., k:].max(axis=-1)
 
     def gap(self, data: mujoco.MjData) -> float:
         """Current pad gap [m]."""

@@ -385,10 +385,14 @@ class Scene:
         """Gap between the innermost pad faces along the tool's y axis [m], now."""
         return self.robot.gap(data)
 
-    def gripper_gaps(self, body_pos: np.ndarray, body_quat: np.ndarray) -> np.ndarray:
+    def gripper_gaps(
+        self, body_pos: np.ndarray, body_quat: np.ndarray, R_WG: np.ndarray | None = None
+    ) -> np.ndarray:
         """The pad gap [m] from logged body poses (..., nbody, 3) and (..., nbody, 4, wxyz),
-        vectorised over the leading axes."""
-        return self.robot.gap_from_body_poses(body_pos, body_quat)
+        vectorised over the leading axes; ``R_WG`` (..., 3, 3), the tool site's rotation at
+        the same state, if known, saves computing the closing axis."""
+        y_W = None if R_WG is None else R_WG[..., :, 1]
+        return self.robot.gap_from_body_poses(body_pos, body_quat, y_W)
 
     def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
         """The pad sensors' contact slots from sensordata of shape (..., nsensordata).

@@ -111,7 +111,7 @@ class TickLog:
         qpos = self.qpos[sl]
         self.t[sl] = np.arange(k0, k1) * self.dt + self.dt
         self.q[sl] = qpos[:, sc.arm_qpos_adr]
-        self.gripper_gap[sl] = sc.gripper_gaps(self.body_pos[sl], self.body_quat[sl])
+        self.gripper_gap[sl] = sc.gripper_gaps(self.body_pos[sl], self.body_quat[sl], self.R_WG[sl])
         pads = sc.pad_sensor_rows(self.sensordata[sl])  # (ticks, sensors, slots, 4)
         self.pad_force[sl] = pads[..., 1].sum(axis=-1) @ self._pad_sides
         found = pads[:, :, 0, 0].max(axis=1)  # contacts counted, slot 0 of each pad sensor
