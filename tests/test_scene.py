@@ -11,10 +11,12 @@ import mujoco
 import numpy as np
 import pytest
 
+from pickplace import loader
 from pickplace.errors import SceneError, UnknownNameError
 from pickplace.loader import load_scene
 from pickplace.robot import DEFAULT_WORLD, bundled_robots
 from pickplace.scene import WorldNames
+from pickplace.sweep import SweepRequest, run_sweep
 
 # Sum of the iiwa 14 joint offsets along z plus the flange (issue 2): the flange height at q = 0.
 FLANGE_HEIGHT_AT_ZERO = 0.1575 + 0.2025 + 0.2045 + 0.2155 + 0.1845 + 0.2155 + 0.081 + 0.045
@@ -201,3 +203,14 @@ def test_an_edited_world_is_composed_again(tmp_path: Path) -> None:
         text.replace('<body name="bin1" pos="0 -0.55 0">', '<body name="bin1" pos="0 -0.5 0">')
     )
     assert load_scene(world).source_bin.center_W[1] == pytest.approx(-0.5)
+
+
+def test_a_sweep_composes_its_robot_once_per_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Trials copy the cached scene's model; composing and calibrating happens once."""
+    loader.clear_scene_cache()
+    calls = []
+    compose = loader.load_robot
+    monkeypatch.setattr(loader, "load_robot", lambda *a, **k: calls.append(1) or compose(*a, **k))
+    report = run_sweep(SweepRequest("pick-place", "qp", 3, 0, 1, robot="panda-hand"))
+    assert report["successes"] == 3
+    assert len(calls) == 1
