@@ -1,1 +1,2 @@
-"""pickplace: a 7-DoF arm picks a red brick from one bin and places it in another."""
+"""pickplace: an arm with a gripper, described in a robot file, picks a red brick from one bin
+and places it in another."""

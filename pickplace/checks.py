@@ -68,8 +68,10 @@ class SuccessCriteria:
     """Geometry that decides grasp, drop and placement verdicts.
 
     Attributes:
-        grasp_force_fraction: A pad touches the brick "firmly" above this fraction of the
-            gripper's force limit (0.25 · 40 N = 10 N; a held brick sees the full 40 N).
+        grasp_force_fraction: A side's pads push on the brick "firmly" above this fraction of
+            the gripper's squeeze force, measured in calibration (:attr:`Scene.squeeze_force
+            <pickplace.scene.Scene.squeeze_force>`; the iiwa's WSG-like gripper: 0.25 · 40 N =
+            10 N, and a held brick sees the full 40 N).
         grasp_gap_fraction: After closing, the finger gap must be at least this fraction of the
             brick's width across the fingers (0.5 · 0.05 m); an empty gripper closes to 0.
         drop_slip: Brick displacement in the gripper frame since the grasp [m] that counts as
@@ -302,7 +304,7 @@ class GraspMonitor(Check):
         self.p_GO_grasp: np.ndarray | None = None
         self.contact_lost_since: float | None = None
         self.brick_width = grasp_width(ctx.plan, ctx.scene)
-        self.firm_force = ctx.criteria.grasp_force_fraction * ctx.scene.gripper_force_limit
+        self.firm_force = ctx.criteria.grasp_force_fraction * ctx.scene.squeeze_force
 
     def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
         holding = np.zeros(k1 - k0, dtype=bool)

@@ -1,4 +1,4 @@
-"""The ``pickplace`` command: run a scenario, list scenarios, sweep many seeds.
+"""The ``pickplace`` command: run or plan a scenario, sweep many seeds, list scenarios and robots.
 
 Exit codes (nothing else is ever returned, and no traceback is printed):
 
@@ -27,11 +27,14 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from pickplace.errors import OutputError, PickPlaceError
+from pickplace.robot import DEFAULT_ROBOT
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; other signals give 128 + their number
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: stdout's reader went away
+SCENE_HELP = "world file the robot is composed into (default: scenes/world.xml)"
+ROBOT_HELP = f"bundled robot (pickplace robots) or robot.toml (default: {DEFAULT_ROBOT})"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -118,7 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate one scenario")
-    run.add_argument("--scene", type=Path, help="MJCF scene file (default: scenes/scene.xml)")
+    run.add_argument("--scene", type=Path, help=SCENE_HELP)
+    run.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
     run.add_argument("--scenario", default="pick-place", help="scenario name (pickplace scenarios)")
     run.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
     run.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
@@ -149,7 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan = sub.add_parser(
         "plan", help="plan a scenario and pre-flight its candidates, without physics"
     )
-    plan.add_argument("--scene", type=Path, help="MJCF scene file (default: scenes/scene.xml)")
+    plan.add_argument("--scene", type=Path, help=SCENE_HELP)
+    plan.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
     plan.add_argument(
         "--scenario", default="pick-place", help="scenario name (pickplace scenarios)"
     )
@@ -167,6 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("scenarios", help="list the scenarios").add_argument(
         "--json", action="store_true", help="print a JSON object on stdout"
     )
+    sub.add_parser("robots", help="list the bundled robots").add_argument(
+        "--json", action="store_true", help="print a JSON object on stdout"
+    )
 
     sweep = sub.add_parser("sweep", help="run many seeds of a scenario in parallel")
     sweep.add_argument(
@@ -175,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="scenario name (default: pick-place-random; see pickplace scenarios)",
     )
     sweep.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    sweep.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
     sweep.add_argument(
         "--trials", type=_positive_int, default=20, help="number of trials (default: 20)"
     )
@@ -199,6 +208,7 @@ OPTION_OF_FIELD = {
     "seed": "--seed",
     "brick": "--brick",
     "scene_path": "--scene",
+    "robot": "--robot",
     "record": "--record",
     "connect": "--connect",
     "control_rate_hz": "--control-rate",
@@ -326,7 +336,7 @@ class _ProgressObserver:
 def _human_summary(s: dict[str, Any]) -> str:
     verdict = "SUCCESS" if s["success"] else f"FAILED ({s['failure']})"
     lines = [
-        f"{s['scenario']} / {s['controller']} / seed {s['seed']}: {verdict}",
+        f"{s['scenario']} / {s['robot']} / {s['controller']} / seed {s['seed']}: {verdict}",
         f"  sim {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s wall "
         f"({s['realtime_factor']:.1f}x real time), {s['ticks']} ticks",
     ]
@@ -362,6 +372,7 @@ def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
         seed=args.seed,
         brick=BrickPlacement(*args.brick) if args.brick is not None else None,
         scene_path=args.scene,
+        robot=args.robot,
         record=args.record,
         spawn=args.spawn,
         connect=args.connect,
@@ -390,6 +401,7 @@ def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 
 def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
+    from pickplace.robot import resolve_description
     from pickplace.runner import RunRequest, plan_report
     from pickplace.scenarios import BrickPlacement
 
@@ -399,11 +411,13 @@ def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
         seed=args.seed,
         brick=BrickPlacement(*args.brick) if args.brick is not None else None,
         scene_path=args.scene,
+        robot=args.robot,
         speed=args.speed,
     )
     report = plan_report(req)
     out = {
         "scenario": req.scenario,
+        "robot": resolve_description(req.robot).name,
         "controller": req.controller,
         "seed": req.seed,
         **report.as_dict(),
@@ -415,7 +429,7 @@ def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 def _human_plan(p: dict[str, Any]) -> str:
     n = len(p["candidates"])
-    head = f"{p['scenario']} / {p['controller']} / seed {p['seed']}: "
+    head = f"{p['scenario']} / {p['robot']} / {p['controller']} / seed {p['seed']}: "
     if p["feasible"]:
         head += f"feasible plan '{p['chosen']}' ({n} candidate(s) tried"
     else:
@@ -464,8 +478,8 @@ def _human_sweep(report: dict[str, Any]) -> str:
     p50, p95 = report["place_error_p50_m"], report["place_error_p95_m"]
     rate = report["trials_per_second"]
     lines = [
-        f"{report['scenario']} / {report['controller']}: {report['successes']}/"
-        f"{report['completed']} succeeded ({report['success_rate']:.0%})"
+        f"{report['scenario']} / {report['robot']} / {report['controller']}: "
+        f"{report['successes']}/{report['completed']} succeeded ({report['success_rate']:.0%})"
         + (f" of {report['trials']} requested" if report["completed"] < report["trials"] else "")
         + (f", {rate:.2f} trials/s" if rate is not None else "")
         + f" with {report['workers']} worker(s)"
@@ -481,11 +495,50 @@ def _human_sweep(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def robot_rows() -> list[dict[str, Any]]:
+    """One row per bundled robot: name, arm joints, gripper, open width, squeeze, file."""
+    from pickplace.robot import ROBOTS_DIR, bundled_robots, load_robot
+
+    rows = []
+    for name in bundled_robots():
+        r = load_robot(name).robot
+        rows.append(
+            {
+                "name": r.name,
+                "joints": r.n_joints,
+                "gripper": r.gripper_kind,
+                "open_width_m": r.open_width,
+                "squeeze_force_n": r.squeeze_force,
+                "description": str(r.description.source.relative_to(ROBOTS_DIR.parent)),
+            }
+        )
+    return rows
+
+
+def _cmd_robots(args: argparse.Namespace, stop: InterruptHandler) -> int:
+    rows = robot_rows()
+    if args.json:
+        _write_stdout(json.dumps({"robots": rows}))
+        return EXIT_OK
+    width = max(len(r["name"]) for r in rows)
+    _write_stdout(
+        "\n".join(
+            f"{r['name']:<{width}}  {r['joints']} joints, gripper: {r['gripper']}, opens "
+            f"{r['open_width_m'] * 1000:.1f} mm, squeezes {r['squeeze_force_n']:.1f} N  "
+            f"({r['description']})"
+            for r in rows
+        )
+    )
+    return EXIT_OK
+
+
 def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.sweep import SweepRequest, run_sweep
 
     workers = args.workers if args.workers is not None else _default_workers()
-    req = SweepRequest(args.scenario, args.controller, args.trials, args.seed, workers)
+    req = SweepRequest(
+        args.scenario, args.controller, args.trials, args.seed, workers, robot=args.robot
+    )
     req.validate()
     progress = None if args.json else _progress(float(args.trials), f"sweep {args.scenario}")
     if progress is not None:
@@ -530,6 +583,7 @@ def _main(argv: Sequence[str] | None, stop: InterruptHandler) -> int:
             "run": _cmd_run,
             "plan": _cmd_plan,
             "scenarios": _cmd_scenarios,
+            "robots": _cmd_robots,
             "sweep": _cmd_sweep,
         }
         return commands[args.command](args, stop)

@@ -81,7 +81,7 @@ class IKResult:
         status: Outcome.
         V_cmd: Commanded tool spatial velocity [v; ω] in world [m/s, rad/s].
         error: Pose error [position; rotation vector] in world [m, rad].
-        J_WG: Tool Jacobian (6, 7) at the tick's q.
+        J_WG: Tool Jacobian (6, n) at the tick's q (n arm joints).
         x_WG: Tool pose at the tick's q (the commanded tool frame) as mink's wxyz_xyz vector
             [qw, qx, qy, qz, x, y, z] ([-], [m]).
     """
@@ -173,7 +173,7 @@ class DiffIKController(ABC):
 
         Args:
             q: Joint positions [rad], loaded into :attr:`kinematics`.
-            J: Tool Jacobian (6, 7) at q.
+            J: Tool Jacobian (6, n) at q.
             V_cmd: Commanded tool spatial velocity [v; ω] in world [m/s, rad/s].
             x_WG: Tool pose at q [qw, qx, qy, qz, x, y, z] ([-], [m]).
         """
@@ -308,7 +308,7 @@ class QPController(DiffIKController):
             model, gain=w.limit_gain, min_distance_from_limits=w.limit_margin
         )
         self.velocity_limit = mink.VelocityLimit(
-            model, dict(zip(scene.names.arm_joints, self.v_max.tolist(), strict=True))
+            model, dict(zip(scene.arm_joint_names, self.v_max.tolist(), strict=True))
         )
         self.limits: list[mink.Limit] = [self.configuration_limit, self.velocity_limit]
         # The frame task's target: one SE3 whose parameter vector is rewritten every tick.

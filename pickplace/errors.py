@@ -35,8 +35,11 @@ class SceneError(PickPlaceError):
 class RobotError(PickPlaceError):
     """A robot description, or an arm or gripper file it names, is missing or unusable.
 
-    The message is one line naming the file, the field or element, and what would be valid.
+    The message is one line naming the file, the field or element, and what would be valid;
+    ``field`` is the input it is about: the robot (``RunRequest.robot``, ``--robot``).
     """
+
+    field = "robot"
 
 
 class UnknownNameError(PickPlaceError, KeyError):

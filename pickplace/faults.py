@@ -20,26 +20,26 @@ from pickplace.task import World
 
 
 class GripperDisabled:
-    """The gripper actuator produces no force: the fingers never close."""
+    """The gripper's actuators produce no force: the fingers never squeeze."""
 
     name = "gripper-disabled"
 
     def __init__(self, scene: Scene) -> None:
-        self.actuator = scene.gripper_actuator_id
+        self.actuators = scene.gripper_actuator_ids.copy()
 
     def apply(self, world: World, tick: int) -> str | None:
         if tick != 0:
             return None
-        world.model.actuator_gainprm[self.actuator, :] = 0.0
-        world.model.actuator_biasprm[self.actuator, :] = 0.0
-        return "gripper actuator gain set to 0"
+        world.model.actuator_gainprm[self.actuators, :] = 0.0
+        world.model.actuator_biasprm[self.actuators, :] = 0.0
+        return f"gain of the gripper's {len(self.actuators)} actuator(s) set to 0"
 
 
 class BrickMoved:
     """After the plan was made, the brick is pushed 8 cm along world x, out of the fingers' way.
 
-    8 cm exceeds half the brick's length (3.75 cm) plus a finger's half-width (1 cm), so the
-    fingers close beside it.
+    8 cm exceeds half the brick's length (3.75 cm) plus a pad's half-width (1 to 1.1 cm for the
+    bundled grippers), so the fingers close beside it.
     """
 
     name = "brick-moved"
@@ -57,7 +57,8 @@ class BrickMoved:
 
 
 class HeavyBrick:
-    """The brick weighs 30 kg: 294 N of weight against 2 pads × 40 N × μ 1 = 80 N of friction."""
+    """The brick weighs 30 kg: 294 N of weight against 2 pads × squeeze × μ 1 of friction (80 N
+    for the iiwa's 40 N WSG-like gripper, 122 N for the strongest bundled one, the UR5e's)."""
 
     name = "heavy-brick"
     MASS = 30.0
@@ -85,7 +86,8 @@ class Knock:
     """A 300 N downward blow on the brick for 0.02 s while it is carried.
 
     It lands halfway through the first motion of the plan's transport phase (the brick lifted,
-    on its way to the other bin); 300 N far exceeds the 80 N that friction at the pads can hold.
+    on its way to the other bin); 300 N exceeds what friction at the pads can hold (80 N for
+    the iiwa's WSG-like gripper).
     """
 
     name = "knock"

@@ -27,6 +27,10 @@ from mink.lie import SE3, SO3
 from pickplace.errors import PlanError
 from pickplace.geometry import require_pose, wrap_angle
 
+GRASP_OPEN_WIDTH = 0.10
+"""Gap a gripper opens to around the brick for a grasp, at most [m]: 25 mm beside each face of
+the 50 mm brick (less when the gripper opens less)."""
+
 _HORIZONTAL_TOL = 1e-9
 """Below this horizontal length [-], G's x axis is considered vertical in ``yaw_of``."""
 

@@ -31,6 +31,14 @@ timestep and solver options. Then:
    wider than the brick.
 6. **Footprint**: every collision geom of the gripper, at the open command, as a box in the
    tool frame (its local bounding box, rotated into G and bounded again).
+7. **Action times**: the commanded gap ramped as a plan ramps it (linearly in gap, through the
+   gap map), from open to closed on the brick-sized box and from closed on it to open. The
+   **close time** is the shortest ramp by whose end the grip has been steady — both sides at
+   :data:`GRIP_FORCE_SHARE` of their squeeze, the gap still to :data:`STEADY_GAP_SPEED` — for
+   :data:`ACTION_HOLD`; the **open time** the shortest ramp that has the pads clear the brick
+   by :data:`RELEASE_CLEARANCE` a side as long before its end. The ramps span the gap a grasp
+   opens to (:data:`~pickplace.grasp.GRASP_OPEN_WIDTH`, or less when the gripper opens less);
+   both times are multiples of :data:`ACTION_RESOLUTION`, found by doubling and bisection.
 
 Each stage waits until the gripper's velocities fall below :data:`SETTLED_SPEED`, for at most
 :data:`MAX_SETTLE_TIME`; a gripper still faster than :data:`STILL_MOVING` then is an error
@@ -40,12 +48,14 @@ Each stage waits until the gripper's velocities fall below :data:`SETTLED_SPEED`
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
+from pickplace.grasp import GRASP_OPEN_WIDTH
 from pickplace.robot_description import TcpOverride
 from pickplace.robot_parts import PreparedGripper
 from pickplace.robot_physics import stiff_pad_model
@@ -83,6 +93,26 @@ MOVING = 1e-4
 FINGERTIP_TRAVEL = 0.5
 """Finger geoms that travel at least this fraction of their side's largest travel are
 fingertip candidates (where the box is put)."""
+
+ACTION_HOLD = 0.03
+"""A gripper action is done this long before its ramp ends [s]: the grip is steady for three
+control ticks at 100 Hz before a plan lifts, the pads clear before it retreats."""
+
+ACTION_RESOLUTION = 0.025
+"""Action times are whole multiples of this [s] ..."""
+
+MAX_ACTION_TIME = 2.0
+"""... of at most this [s]: a gripper slower than that fails the calibration."""
+
+GRIP_FORCE_SHARE = 0.95
+"""The grip is steady when each side presses with this share of its settled squeeze ..."""
+
+STEADY_GAP_SPEED = 1e-3
+"""... and the pad gap changes slower than this [m/s] (0.05 mm in 50 ms)."""
+
+RELEASE_CLEARANCE = 0.005
+"""The pads have let go when each clears the brick by this [m] (or by half of what the
+gripper opens beyond the brick, when that is less)."""
 
 _SNAP = 1e-9
 
@@ -137,6 +167,10 @@ class GripperCalibration:
         footprint_G: Their boxes in the tool frame at the open command, (k, 2, 3) as
             [min corner, max corner] [m].
         brick_half_extents: Half sizes of the box used (brick length, width, height) [m].
+        close_time: Shortest ramp of the commanded gap from the grasp's open width to closed
+            whose last :data:`ACTION_HOLD` the grip on the box is steady [s].
+        open_time: Shortest ramp from closed on the box to the grasp's open width that has
+            the pads let go of it :data:`ACTION_HOLD` before its end [s].
         sim_time: Simulated time the calibration took [s].
     """
 
@@ -161,6 +195,8 @@ class GripperCalibration:
     footprint_geoms: tuple[str, ...]
     footprint_G: np.ndarray
     brick_half_extents: np.ndarray
+    close_time: float
+    open_time: float
     sim_time: float
 
     def fraction_for_width(self, width: float) -> float:
@@ -309,6 +345,12 @@ class _Rig:
                     f"(damped joints, no self-excited linkage)",
                 )
         self.sim_time += d.time - t0
+
+    def step(self, ctrl: np.ndarray) -> None:
+        """One physics step at command ``ctrl``."""
+        self.data.ctrl[self.acts] = ctrl
+        mujoco.mj_step(self.model, self.data)
+        self.sim_time += self.model.opt.timestep
 
     def state(self) -> np.ndarray:
         m, d = self.model, self.data
@@ -665,6 +707,101 @@ def _squeeze(
     rig.settle(u_closed, "squeezing a brick-sized box")
 
 
+class _Actions:
+    """Gripper actions as a plan commands them: the gap ramped linearly, through the gap map."""
+
+    def __init__(
+        self,
+        rig: _Rig,
+        pads: tuple[list[int], list[int]],
+        faces: tuple[np.ndarray, np.ndarray],
+        y_B: np.ndarray,
+        fractions: np.ndarray,
+        gaps: np.ndarray,
+        u_open: np.ndarray,
+        u_closed: np.ndarray,
+    ) -> None:
+        self.rig, self.pads, self.faces, self.y_B = rig, pads, faces, y_B
+        self.fractions, self.gaps = fractions, gaps
+        self.u_open, self.u_closed = u_open, u_closed
+        self.open_width = min(float(gaps[-1]), GRASP_OPEN_WIDTH)
+
+    def ctrl(self, width: float) -> np.ndarray:
+        """Command for gap ``width`` [m] (as :meth:`GripperCalibration.ctrl_for_width`)."""
+        s = float(np.clip(np.interp(width, self.gaps, self.fractions), 0.0, 1.0))
+        return self.u_closed + s * (self.u_open - self.u_closed)
+
+    def gap(self) -> float:
+        return _gap(self.rig, self.pads, self.faces, self.y_B)
+
+    def ramp(self, state: np.ndarray, duration: float, closing: bool) -> Iterator[float]:
+        """From ``state``, ramp the commanded gap over ``duration`` [s]; yield each step's
+        time [s] (the rig's state is that step's)."""
+        rig = self.rig
+        rig.restore(state)
+        dt = rig.model.opt.timestep
+        for k in range(1, max(1, round(duration / dt)) + 1):
+            u = min(1.0, k * dt / duration)
+            rig.step(self.ctrl(self.open_width * ((1.0 - u) if closing else u)))
+            yield k * dt
+
+    def grip_steady_at(self, open_state: np.ndarray, duration: float, squeeze: np.ndarray) -> float:
+        """Time [s] from which the grip stays steady while closing over ``duration``, or inf."""
+        rig = self.rig
+        steady_since, last = math.inf, math.nan
+        for t in self.ramp(open_state, duration, closing=True):
+            gap = self.gap()
+            forces = rig.box_contacts("brick")
+            per_side = [sum(forces.get(g, 0.0) for g in side) for side in self.pads]
+            still = (
+                math.isfinite(last) and abs(gap - last) < STEADY_GAP_SPEED * rig.model.opt.timestep
+            )
+            ok = still and all(
+                f >= GRIP_FORCE_SHARE * s for f, s in zip(per_side, squeeze, strict=True)
+            )
+            if not ok:
+                steady_since = math.inf
+            elif not math.isfinite(steady_since):
+                steady_since = t
+            last = gap
+        return steady_since
+
+    def released_at(self, squeezed: np.ndarray, duration: float, clear_gap: float) -> float:
+        """Time [s] at which the pad gap first reaches ``clear_gap`` while opening, or inf."""
+        for t in self.ramp(squeezed, duration, closing=False):
+            if self.gap() >= clear_gap:
+                return t
+        return math.inf
+
+    @staticmethod
+    def shortest(done_at: Callable[[float], float], what: str) -> float:
+        """The shortest ramp T (a multiple of :data:`ACTION_RESOLUTION`) with
+        ``done_at(T) <= T - ACTION_HOLD``: doubling, then bisection."""
+
+        def ok(k: int) -> bool:
+            T = k * ACTION_RESOLUTION
+            return done_at(T) <= T - ACTION_HOLD + 1e-12
+
+        k_max = round(MAX_ACTION_TIME / ACTION_RESOLUTION)
+        hi = 1
+        while not ok(hi):
+            if hi >= k_max:
+                raise _Problem(
+                    "mjcf",
+                    f"the gripper does not {what} within {MAX_ACTION_TIME:g} s of a ramped "
+                    f"command; valid: a gripper that closes and opens within that",
+                )
+            hi = min(2 * hi, k_max)
+        lo = hi // 2  # not ok (or 0)
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if ok(mid):
+                hi = mid
+            else:
+                lo = mid
+        return round(hi * ACTION_RESOLUTION, 9)
+
+
 def calibrate_gripper(
     gripper: PreparedGripper,
     brick_half_extents: np.ndarray,
@@ -838,6 +975,23 @@ def _calibrate(
             f"gripper that opens wider than the brick",
         )
 
+    # Action times: the plan's ramps of the commanded gap, closing on the box and opening.
+    actions = _Actions(rig, side_pads, faces, y_B, fractions, gap_arr, u_open, u_closed)
+    rig.restore(open_state)
+    rig.settle(actions.ctrl(actions.open_width), "opening to the grasp's width")
+    rig.place_box("brick", tcp_B, R_BG)
+    open_on_brick = rig.state()  # (the state holds the box's mocap pose)
+    _squeeze(rig, open_state, u_closed, tcp_B, R_BG)
+    squeezed = rig.state()
+    close_time = actions.shortest(
+        lambda T: actions.grip_steady_at(open_on_brick, T, per_side), "close on a brick-sized box"
+    )
+    clear = min(RELEASE_CLEARANCE, 0.25 * (actions.open_width - width))
+    open_time = actions.shortest(
+        lambda T: actions.released_at(squeezed, T, width + 2.0 * clear),
+        "let go of a brick-sized box",
+    )
+
     # Footprint at the open command, in the tool frame.
     rig.restore(open_state)
     footprint = []
@@ -872,5 +1026,7 @@ def _calibrate(
         footprint_geoms=tuple(rig.name(int(g)) for g in rig.geoms),
         footprint_G=np.array(footprint),
         brick_half_extents=half.copy(),
+        close_time=close_time,
+        open_time=open_time,
         sim_time=rig.sim_time,
     )

@@ -1,9 +1,10 @@
 """Arm-only kinematics for differential IK: tool pose and Jacobian as functions of q.
 
 The IK works on the scene's arm-only model (:attr:`~pickplace.scene.Scene.arm_model`), in which
-every joint but the arm's is removed (fingers, the brick's free joint), so that nq = nv = 7 and
-mink's tasks and limits see only the arm. Bodies, sites and geometry are unchanged, so the tool
-site's forward kinematics are identical to the simulation's.
+every joint but the arm's is removed (the gripper's, the brick's free joint), so that nq = nv =
+n, the robot's number of arm joints, and mink's tasks and limits see only the arm. Bodies, sites
+and geometry are unchanged, so the tool site's forward kinematics are identical to the
+simulation's.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ class ArmKinematics:
         self.model = model if model is not None else scene.arm_model
         self.configuration = mink.Configuration(self.model, q=scene.q_home.copy())
         self.data = self.configuration.data
-        self.tool_site = scene.names.tool_site
+        self.tool_site = scene.tool_site_name
         self.tool_site_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, self.tool_site)
         self.nv = int(self.model.nv)
         # Live views into MjData (its buffers never move): no attribute look-ups per tick.
@@ -64,13 +65,13 @@ class ArmKinematics:
     def wxyz_xyz(self) -> np.ndarray:
         """Pose of the tool site as mink's parameter vector [qw, qx, qy, qz, x, y, z]
         ([-], [m]); a new array."""
-        out = np.empty(7)
+        out = np.empty(4 + 3)  # quaternion, position
         mujoco.mju_mat2Quat(out[:4], self._R_WG_flat)
         out[4:] = self._p_WG
         return out
 
     def wxyz_xyz_list(self) -> list[float]:
-        """:meth:`wxyz_xyz` as a list of 7 Python floats ([-], [m]), for plain float math."""
+        """:meth:`wxyz_xyz` as a list of Python floats ([-], [m]), for plain float math."""
         mujoco.mju_mat2Quat(self._quat_WG, self._R_WG_flat)
         return self._quat_WG.tolist() + self._p_WG.tolist()
 
@@ -83,7 +84,7 @@ class ArmKinematics:
         return self._R_WG_flat.reshape(3, 3).copy()
 
     def J_WG(self) -> np.ndarray:
-        """Spatial Jacobian (6, 7) of the tool site at the loaded q; a new array.
+        """Spatial Jacobian (6, n) of the tool site at the loaded q; a new array.
 
         Rows are [v; ω]: the velocity of the tool-site origin [m/s] and the angular velocity
         [rad/s], both expressed in world, per unit joint velocity [rad/s].

@@ -307,6 +307,41 @@ def _check_compiles(spec: mujoco.MjSpec, source: Path, field: str) -> None:
         ) from exc
 
 
+def _sanitised_tree(
+    path: Path, field: str, angle: str | None, src: Path
+) -> tuple[ET.Element, list[Path], str, list[str]]:
+    """The file read, its includes inlined, its angle set, scene parts stripped and asset paths
+    made absolute: the tree, every file it depends on, the angle used and the repairs."""
+    if not path.is_file():
+        raise RobotError(f"{src}: {field}: file '{path}' does not exist; valid: an MJCF file")
+    files = [path]
+    root = _read_xml(path, src, field)
+    base = path.parent
+    _inline_includes(root, base, src, field, files)
+    used_angle = _set_angle(root, angle, src, field)
+    repairs = _strip_scene_parts(root)
+    repairs += _resolve_assets(root, base, src, field, files)
+    return root, files, used_angle, repairs
+
+
+def _digest(used_angle: str, files: list[Path]) -> str:
+    digest = hashlib.sha256(used_angle.encode())
+    for f in files:  # contents only: the same files elsewhere share a calibration
+        digest.update(f.read_bytes())
+    return digest.hexdigest()
+
+
+def part_digest(path: Path, field: str, angle: str | None, source: Path | None = None) -> str:
+    """:attr:`Part.digest` of a file without loading it into MuJoCo (XML parsing only).
+
+    Raises:
+        RobotError: As :func:`load_part`, for a missing file, include or asset.
+    """
+    path = path.resolve()
+    _, files, used_angle, _ = _sanitised_tree(path, field, angle, source or path)
+    return _digest(used_angle, files)
+
+
 def load_part(path: Path, field: str, angle: str | None, source: Path | None = None) -> Part:
     """Read an arm or gripper file and sanitise it into a self-contained document.
 
@@ -323,26 +358,15 @@ def load_part(path: Path, field: str, angle: str | None, source: Path | None = N
     """
     path = path.resolve()
     src = source or path
-    if not path.is_file():
-        raise RobotError(f"{src}: {field}: file '{path}' does not exist; valid: an MJCF file")
-    files = [path]
-    root = _read_xml(path, src, field)
-    base = path.parent
-    _inline_includes(root, base, src, field, files)
-    used_angle = _set_angle(root, angle, src, field)
-    repairs = _strip_scene_parts(root)
-    repairs += _resolve_assets(root, base, src, field, files)
+    root, files, used_angle, repairs = _sanitised_tree(path, field, angle, src)
     repairs += _merge_repeated_assets(root, src, field)
     xml, spec, more = _parse_with_repairs(root, src, field)
     repairs += more
     _check_compiles(spec, src, field)
-    digest = hashlib.sha256(used_angle.encode())
-    for f in files:  # contents only: the same files elsewhere share a calibration
-        digest.update(f.read_bytes())
     return Part(
         path=path,
         field=field,
         xml=xml,
         repairs=tuple(repairs),
-        digest=digest.hexdigest(),
+        digest=_digest(used_angle, files),
     )

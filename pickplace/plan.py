@@ -7,10 +7,12 @@ acceleration limits of :class:`PlanConfig`; the gripper stops at every keyframe.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -18,8 +20,11 @@ from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError, require_finite, require_non_negative, require_positive
 from pickplace.geometry import require_pose, rotation_angle, rotation_log, slerp, wrap_angle
-from pickplace.grasp import choose_grasp, choose_place_pose
+from pickplace.grasp import GRASP_OPEN_WIDTH, choose_grasp, choose_place_pose
 from pickplace.trajectory import Keyframe, MotionProfile, PoseTrajectory, profile_by_name
+
+if TYPE_CHECKING:
+    from pickplace.gripper_calibration import GripperCalibration
 
 
 @dataclass(frozen=True)
@@ -34,18 +39,17 @@ class PlanConfig:
         approach_distance: Offset of pre-pick, pre-place and retreat from the grasp, backwards
             along the approach axis (G's -z, world up for a top grasp) [m].
         lift_height: Height the brick is lifted straight up after closing [m].
-        close_time: Duration of closing the gripper, at rest [s]. The command ramps from open
-            to closed over it; measured on the WSG-50-like gripper, a step command squeezes the
-            brick with 95 % of the grip force within 12 ms and the gap is steady after 38 ms,
-            and under the ramp full force comes at 70 % of the ramp: 0.15 s leaves 45 ms of
-            steady grip before lifting.
-        open_time: Duration of opening the gripper, at rest [s]: under the ramp the pads leave
-            the brick halfway and clear it by 5 mm a side at 60 % (measured: 98 % open 28 ms
-            after a step).
+        close_time: Duration of closing the gripper, at rest [s], at least: the command
+            ramps from open to closed over it, and the planner takes the gripper's calibrated
+            close time when longer (:func:`for_gripper`; the grip is steady for its last 30 ms,
+            :mod:`pickplace.gripper_calibration`).
+        open_time: Duration of opening the gripper, at rest [s], at least; likewise the
+            gripper's calibrated open time (the pads clear the brick 30 ms before its end).
         settle_time: Rest at the pick pose before closing [s]; 0 omits the "settle" keyframe.
             The arm arrives within 3 mm of the pick pose (measured at full speed) and settles
             in about 50 ms.
-        open_width: Commanded finger gap when open [m].
+        open_width: Commanded finger gap when open [m], at most: the planner opens a
+            gripper that opens less as wide as it opens (:func:`for_gripper`).
         closed_width: Commanded finger gap when closed [m]; the brick stops the fingers.
         min_segment_duration: Lower bound of every segment duration [s].
         time_quantum: When > 0, every segment duration is rounded up to a whole number of
@@ -63,10 +67,10 @@ class PlanConfig:
     max_angular_accel: float = 2.0
     approach_distance: float = 0.10
     lift_height: float = 0.15
-    close_time: float = 0.15
-    open_time: float = 0.1
+    close_time: float = 0.05
+    open_time: float = 0.05
     settle_time: float = 0.05
-    open_width: float = 0.10
+    open_width: float = GRASP_OPEN_WIDTH
     closed_width: float = 0.0
     min_segment_duration: float = 0.05
     time_quantum: float = 0.0
@@ -98,6 +102,21 @@ class PlanConfig:
 
 
 DEFAULT_PLAN_CONFIG = PlanConfig()
+
+
+def for_gripper(config: PlanConfig, gripper: GripperCalibration) -> PlanConfig:
+    """``config`` fitted to a calibrated gripper: the open width capped at what it opens to
+    [m], the close and open times at least its own [s].
+
+    Raises:
+        PlanError: The gripper does not open wider than ``config.closed_width``.
+    """
+    return dataclasses.replace(
+        config,
+        open_width=min(config.open_width, gripper.open_width),
+        close_time=max(config.close_time, gripper.close_time),
+        open_time=max(config.open_time, gripper.open_time),
+    )
 
 
 @dataclass(frozen=True)

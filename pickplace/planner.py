@@ -27,11 +27,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
+import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.grasp import brick_width_across, top_down_grasps, yaw_of
 from pickplace.kinematics import ArmKinematics
-from pickplace.plan import Plan, PlanConfig, plan_pick_place, swung_pose
+from pickplace.plan import Plan, PlanConfig, for_gripper, plan_pick_place, swung_pose
 from pickplace.preflight import Preflight, PreflightConfig, PreflightResult
 from pickplace.scene import Scene
 from pickplace.timing import SegmentLimits, TimingConfig, retime
@@ -139,7 +140,8 @@ class PickPlacePlanner:
     Args:
         scene: The scene (bins, brick, arm, gripper).
         controller: Name of the run's controller, which the pre-flight runs.
-        config: Planning limits and parameters.
+        config: Planning limits and parameters; the open width is capped at the gripper's
+            (:func:`~pickplace.plan.for_gripper`).
         preflight: Pre-flight rate and thresholds.
     """
 
@@ -152,7 +154,7 @@ class PickPlacePlanner:
         timing: TimingConfig | None = None,
     ) -> None:
         self.scene = scene
-        self.config = config or PlanConfig()
+        self.config = for_gripper(config or PlanConfig(), scene.robot.calibration)
         self.timing = timing or TimingConfig()
         self.preflight = Preflight(scene, controller, preflight)
         dt = self.preflight.dt
@@ -166,10 +168,10 @@ class PickPlacePlanner:
             min_segment_duration=2 * dt,
             time_quantum=dt,
         )
-        pad = scene.pad_geom_ids[0]
-        mu = float(scene.model.geom_friction[pad, 0])  # the pads have contact priority
-        # |a − g| the pads' friction holds on the brick: μ · 2 pads · grip force / mass.
-        self.slip_accel = mu * 2.0 * scene.gripper_force_limit / scene.brick_mass
+        pads = np.concatenate(scene.pad_geom_ids)
+        mu = float(scene.model.geom_friction[pads, 0].min())  # the pads have contact priority
+        # |a − g| the pads' friction holds on the brick: μ · 2 sides · squeeze force / mass.
+        self.slip_accel = mu * 2.0 * scene.squeeze_force / scene.brick_mass
         kin = ArmKinematics(scene)
         kin.update(scene.q_home)
         self.X_WG_home = kin.X_WG()

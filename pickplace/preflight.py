@@ -183,10 +183,9 @@ class Preflight:
         self.data = mujoco.MjData(self.model)
         self._names = scene.arm_joint_names
         self._world = np.array([scene.is_world_geom(g) for g in range(self.model.ngeom)])
-        lo, hi = scene.model.jnt_range[scene.finger_joint_ids].T
-        self._fingers = list(
-            zip(scene.finger_qpos_adr.tolist(), lo.tolist(), hi.tolist(), strict=True)
-        )
+        self._gripper_qpos_adr = scene.gripper_qpos_adr
+        self._width = math.nan  # the last width loaded, and its gripper joint positions
+        self._gripper_qpos = scene.gripper_qpos_for_width(0.0)
 
     def run(
         self, plan: Plan, X_WO_start: SE3, X_WO_goal: SE3 | None, stop_at_problem: bool = True
@@ -285,6 +284,11 @@ class Preflight:
                 f"(limit {cfg.tracking_tolerance * 1000:.0f} mm; status {res.status.value}): "
                 "unreachable or too fast"
             )
+            if self.scene.a_max is None:
+                text += (
+                    " (the robot's description gives no accel_limits, so motions start at full "
+                    "speed: give them, or lower --speed)"
+                )
             return Problem(t, "ik", text, (px, py, pz))
         if contact is not None and clearance < cfg.clearance:
             a, b, pos = contact
@@ -361,12 +365,14 @@ class Preflight:
         return (float(p[0]), float(p[1]), float(p[2]))
 
     def _load(self, q: np.ndarray, width: float, X_WO: SE3) -> None:
-        """Arm at ``q``, fingers at ``width``, brick at ``X_WO``; kinematics and contacts."""
+        """Arm at ``q``, the free fingers at gap ``width`` (the calibrated joint positions of
+        every gripper joint), brick at ``X_WO``; kinematics and contacts."""
         m, d, sc = self.model, self.data, self.scene
         d.qpos[sc.arm_qpos_adr] = q
-        half = 0.5 * width
-        for adr, lo, hi in self._fingers:
-            d.qpos[adr] = lo if half < lo else hi if half > hi else half
+        if width != self._width:  # widths stay the same for most of a plan
+            self._width = width
+            self._gripper_qpos = sc.gripper_qpos_for_width(width)
+        d.qpos[self._gripper_qpos_adr] = self._gripper_qpos
         sc.set_brick_pose(d, X_WO)
         mujoco.mj_kinematics(m, d)
         mujoco.mj_collision(m, d)

@@ -46,7 +46,7 @@ Entity path                                        Contents
 ``summary``                                        static: JSON summary (``TextDocument``)
 =================================================  ==========================================
 
-Names containing ``/`` (``wsg50/left_pad``) are escaped as one path part (``wsg50\\/left_pad``);
+Names containing ``/`` (``gripper/left_pad``) are escaped as one path part (``gripper\\/left_pad``);
 unnamed bodies and geoms are called ``body<i>`` and ``geom<i>``. The file embeds a blueprint:
 the 3D scene on the left; on the right the plot tabs of :data:`PLOTS` (health, tracking,
 joints, gripper and IK) and the event log.
@@ -279,6 +279,10 @@ def one_color(color: Color) -> Callable[[int], list[Color]]:
     return lambda n: [color] * n
 
 
+def _singular_value_names(sc: Scene) -> list[str]:
+    return [f"σ{i}" for i in range(1, min(6, sc.n_joints) + 1)]
+
+
 def _joint_names(sc: Scene) -> list[str]:
     return list(sc.arm_joint_names)
 
@@ -367,12 +371,13 @@ class Plot(Series):
 # Every recorded plot, in blueprint order: its entity, view, series names and style, and what it
 # reads from the tick log. The README's entity table describes each one for users.
 PLOTS: tuple[Plot, ...] = (
-    # σ1..σ6 of the 6×7 tool Jacobian, and σt1..σt3 of its 3×7 translational rows.
+    # σ1..σ6 of the 6×n tool Jacobian (n arm joints; min(6, n) values), and σt1..σt3 of its
+    # 3×n translational rows.
     Plot(
         path="plots/kinematics/singular_values",
         tab="Kinematic health",
         title="Singular values",
-        names=tuple(f"σ{i}" for i in range(1, 7)),
+        names=_singular_value_names,
         values=lambda log, sl: log.sigma[sl],
         legend=False,
     ),

@@ -28,7 +28,7 @@ from pickplace.gripper_calibration import (
     GripperCalibration,
     calibrate_gripper,
 )
-from pickplace.mjcf_parts import load_part
+from pickplace.mjcf_parts import load_part, part_digest
 from pickplace.robot_description import RobotDescription
 from pickplace.robot_parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
 from pickplace.robot_physics import set_stiff_pad
@@ -106,6 +106,23 @@ def resolve_description(robot: str | Path | RobotDescription) -> RobotDescriptio
     )
 
 
+def description_digest(desc: RobotDescription) -> str:
+    """SHA-256 of what a robot is made of: its description and the arm and gripper files with
+    their includes and assets (read, not loaded into MuJoCo).
+
+    Raises:
+        RobotError: A file it names is missing.
+    """
+    # The parsed description (every field), and its path: messages name the file.
+    digest = hashlib.sha256(repr((desc.source, desc.name, desc.arm, desc.gripper)).encode())
+    for mjcf, field_name, angle in (
+        (desc.arm.mjcf, "[arm] mjcf", desc.arm.angle),
+        (desc.gripper.mjcf, "[gripper] mjcf", desc.gripper.angle),
+    ):
+        digest.update(part_digest(mjcf, field_name, angle, desc.source).encode())
+    return digest.hexdigest()
+
+
 # --------------------------------------------------------------------------- composition
 
 
@@ -173,7 +190,10 @@ def _mount_pose(arm: PreparedArm, desc: RobotDescription) -> tuple[np.ndarray, n
 
 
 def _compose(
-    world: Path | mujoco.MjSpec | None, desc: RobotDescription, brick_geom: str
+    world: Path | mujoco.MjSpec | None,
+    desc: RobotDescription,
+    brick_geom: str,
+    pad_slots: int = PAD_SENSOR_SLOTS,
 ) -> _Composed:
     spec = _world_spec(world)
     brick = spec.geom(brick_geom)
@@ -261,7 +281,7 @@ def _compose(
                 objname=GRIPPER_PREFIX + pad,
                 reftype=mujoco.mjtObj.mjOBJ_GEOM,
                 refname=brick_geom,
-                intprm=[_CONTACT_DATA, _REDUCE_MAXFORCE, PAD_SENSOR_SLOTS],
+                intprm=[_CONTACT_DATA, _REDUCE_MAXFORCE, pad_slots],
             )
             names.append(name)
         sensors.append(tuple(names))
@@ -300,12 +320,19 @@ def compose(
 # --------------------------------------------------------------------------- the result
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of (..., 3) arrays by components (about half its cost on small stacks)."""
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
+
+
 def _rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``v`` (..., 3) by unit quaternions ``quat`` (..., 4, wxyz)."""
     w = quat[..., :1]
     u = quat[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    t = 2.0 * _cross(u, v)
+    return v + w * t + _cross(u, t)
 
 
 @dataclass(frozen=True)
@@ -331,8 +358,12 @@ class Robot:
         arm_actuator_ids: The position actuator of each arm joint.
         q_home: Home posture: the description's, or found by IK (``home_source``).
         home_source: ``"description"`` or ``"ik"``.
+        home_candidates: The description's home, or every distinct IK home, best joint margin
+            first (``q_home`` is the first; the scene loader may choose another).
         gripper_actuator_ids: The gripper's actuators (order of command vectors).
-        gripper_joint_ids: The gripper's hinge and slide joints.
+        gripper_joint_ids: The gripper's hinge and slide joints (order of
+            :meth:`qpos_for_width`).
+        gripper_kind: What the gripper is, in words (fingers, joints, actuators, coupling).
         open_command: Command that opens the gripper fully.
         closed_command: Command that closes it (full squeeze on an object).
         open_width: Gap between the pads at the open command [m].
@@ -377,8 +408,10 @@ class Robot:
     arm_actuator_ids: np.ndarray
     q_home: np.ndarray
     home_source: str
+    home_candidates: tuple[np.ndarray, ...]
     gripper_actuator_ids: np.ndarray
     gripper_joint_ids: np.ndarray
+    gripper_kind: str
     open_command: np.ndarray
     closed_command: np.ndarray
     open_width: float
@@ -418,23 +451,40 @@ class Robot:
         """
         return self.calibration.ctrl_for_width(width)
 
-    def gap_from_body_poses(self, body_pos: np.ndarray, body_quat: np.ndarray) -> np.ndarray:
+    def ctrl_for_widths(self, widths: np.ndarray) -> np.ndarray:
+        """:meth:`ctrl_for_width` of every entry of ``widths`` (k,) [m], shape (k, actuators)."""
+        cal = self.calibration
+        s = np.clip(np.interp(widths, cal.sweep_gap, cal.sweep_fraction), 0.0, 1.0)
+        return cal.closed_command + s[:, None] * (cal.open_command - cal.closed_command)
+
+    def qpos_for_width(self, width: float) -> np.ndarray:
+        """Positions of the gripper joints (:attr:`gripper_joint_ids`) of the free fingers at
+        gap ``width`` [m] (clipped to the calibrated range): what a kinematic copy sets."""
+        return self.calibration.qpos_for_width(width)
+
+    def gap_from_body_poses(
+        self, body_pos: np.ndarray, body_quat: np.ndarray, y_W: np.ndarray | None = None
+    ) -> np.ndarray:
         """Pad gap [m] from body poses, vectorised over leading axes.
 
         Args:
             body_pos: Body positions in world, shape (..., nbody, 3) (``data.xpos``).
             body_quat: Body orientations wxyz, shape (..., nbody, 4) (``data.xquat``).
+            y_W: The tool's y axis in world, shape (..., 3), if known (the tool site's rotation
+                matrix's second column); else computed from the tool body's orientation.
 
         Returns:
             Shape (...): the innermost +y pad face minus the innermost -y pad face, along the
             tool's y axis.
         """
-        y_W = _rotate(body_quat[..., self.tool_body_id, :], self.y_tool_body)
-        sides = []
-        for bodies, faces in zip(self.pad_body_ids, self.pad_faces_body, strict=True):
-            p = body_pos[..., bodies, :] + _rotate(body_quat[..., bodies, :], faces)
-            sides.append(np.einsum("...ki,...i->...k", p, y_W))
-        return sides[0].min(axis=-1) - sides[1].max(axis=-1)
+        if y_W is None:
+            y_W = _rotate(body_quat[..., self.tool_body_id, :], self.y_tool_body)
+        bodies = np.concatenate(self.pad_body_ids)
+        faces = np.concatenate(self.pad_faces_body)
+        p = body_pos[..., bodies, :] + _rotate(body_quat[..., bodies, :], faces)  # both sides
+        along = np.einsum("...ki,...i->...k", p, y_W)
+        k = len(self.pad_body_ids[0])
+        return along[..., :k].min(axis=-1) - along[..., k:].max(axis=-1)
 
     def gap(self, data: mujoco.MjData) -> float:
         """Current pad gap [m]."""
@@ -511,25 +561,31 @@ def _ids(model: mujoco.MjModel, obj: mujoco.mjtObj, names: tuple[str, ...]) -> n
 _IK_DAMPING = 1e-3
 _IK_MAX_STEP = 0.3  # [rad] per iteration
 _IK_ITERATIONS = 100
+HOME_SEEDS = 8
+"""Seeds of the IK that finds home candidates when a description gives no home."""
+HOME_DISTINCT = 1e-3
+"""Home candidates closer than this in every joint [rad] are the same posture."""
 
 
-def _home_ik(
+def _home_candidates(
     model: mujoco.MjModel,
     joint_ids: np.ndarray,
     site: int,
     q_min: np.ndarray,
     q_max: np.ndarray,
     src: str,
-) -> np.ndarray:
-    """Arm posture that puts the tool site on the world's ``home_tool`` site.
+) -> list[np.ndarray]:
+    """Arm postures that put the tool site on the world's ``home_tool`` site, best first.
 
     Damped least squares (λ = 1e-3, steps of at most 0.3 rad, 100 iterations) on position and
-    orientation from eight deterministic seeds — the middle of each joint's range (0 for
-    continuous joints; a zero seed fails where 0 is outside a range), then uniform draws over
-    the middle half of the ranges — clamped to the limits each step. Of the seeds that reach
-    the pose within 0.1 mm and 1 mrad, the posture farthest from its nearest joint limit
-    (relative to the range; continuous joints count ±π) is returned. A first method: the
-    pre-flight of the plan is to choose among IK homes later.
+    orientation from :data:`HOME_SEEDS` deterministic seeds — the middle of each joint's range
+    (0 for continuous joints; a zero seed fails where 0 is outside a range), then uniform draws
+    over the middle half of the ranges — clamped to the limits each step. The seeds that reach
+    the pose within 0.1 mm and 1 mrad give the candidates (postures within
+    :data:`HOME_DISTINCT` of each other count once), ordered by their distance from the nearest
+    joint limit relative to the range (continuous joints count ±π), largest first. Margin alone
+    does not make a good home (``../shared/notes/robot-models.md``): the scene loader
+    (:mod:`pickplace.loader`) chooses among them by the pre-flight of the nominal plan.
     """
     target = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, HOME_TOOL_SITE)
     if target < 0:
@@ -547,10 +603,12 @@ def _home_ik(
     hi = np.where(np.isfinite(q_max), q_max, np.pi)
     mid = np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0)
     rng = np.random.default_rng(0)
-    seeds = [mid] + [mid + rng.uniform(-0.25, 0.25, mid.shape) * (hi - lo) for _ in range(7)]
+    seeds = [mid] + [
+        mid + rng.uniform(-0.25, 0.25, mid.shape) * (hi - lo) for _ in range(HOME_SEEDS - 1)
+    ]
     jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
     eye = np.eye(6)
-    best, best_margin = None, -np.inf
+    found: list[tuple[float, np.ndarray]] = []
     for seed in seeds:
         q = seed.copy()
         for _ in range(_IK_ITERATIONS):
@@ -565,9 +623,9 @@ def _home_ik(
                 [p_goal - data.site_xpos[site], data.site_xmat[site].reshape(3, 3) @ e_rot_local]
             )
             if np.linalg.norm(e[:3]) < 1e-4 and np.linalg.norm(e[3:]) < 1e-3:
-                margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
-                if margin > best_margin:
-                    best, best_margin = q.copy(), margin
+                if all(np.max(np.abs(q - other)) > HOME_DISTINCT for _, other in found):
+                    margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
+                    found.append((margin, q.copy()))
                 break
             mujoco.mj_jacSite(model, data, jacp, jacr, site)
             J = np.vstack([jacp[:, dadr], jacr[:, dadr]])
@@ -576,12 +634,31 @@ def _home_ik(
             if step > _IK_MAX_STEP:
                 dq *= _IK_MAX_STEP / step
             q = np.clip(q + dq, q_min, q_max)
-    if best is None:
+    if not found:
         raise RobotError(
             f"{src}: [arm] home: not given, and IK found no posture that puts the tool on the "
             f"world's '{HOME_TOOL_SITE}' pose; valid: set home = [...] (one value per arm joint)"
         )
-    return best
+    found.sort(key=lambda item: -item[0])
+    return [q for _, q in found]
+
+
+def _gripper_kind(model: mujoco.MjModel, joints: np.ndarray, gripper: PreparedGripper) -> str:
+    """The gripper in words, e.g. ``"2 slide joints, 1 actuator"``."""
+    types = model.jnt_type[joints]
+    slides = int(np.sum(types == mujoco.mjtJoint.mjJNT_SLIDE))
+    hinges = int(np.sum(types == mujoco.mjtJoint.mjJNT_HINGE))
+    parts = [
+        f"{k} {what} joint{'s' if k != 1 else ''}"
+        for k, what in ((slides, "slide"), (hinges, "hinge"))
+        if k
+    ]
+    acts = len(gripper.actuators)
+    text = ("linkage of " if hinges else "") + " and ".join(parts)
+    text += f", {acts} actuator{'s' if acts != 1 else ''}"
+    if gripper.coupling is not None:
+        text += " (independent fingers coupled by the loader)"
+    return text
 
 
 def _compile(spec: mujoco.MjSpec, src: str) -> mujoco.MjModel:
@@ -598,6 +675,7 @@ def load_robot(
     *,
     home_width: float | None = None,
     brick_geom: str = BRICK_GEOM,
+    pad_slots: int = PAD_SENSOR_SLOTS,
 ) -> Composition:
     """Compose, calibrate and resolve a robot.
 
@@ -607,13 +685,14 @@ def load_robot(
         world: World MJCF file or spec; None: ``scenes/world.xml``.
         home_width: Gripper gap of the ``home`` keyframe [m]; None: the open width.
         brick_geom: The world's brick geom.
+        pad_slots: Contacts each pad–brick sensor reports.
 
     Raises:
         RobotError: See :func:`compose`; also no home posture could be found.
     """
     desc = resolve_description(robot)
     src = str(desc.source)
-    composed = _compose(world, desc, brick_geom)
+    composed = _compose(world, desc, brick_geom, pad_slots)
     spec, calib = composed.spec, composed.calibration
     model = _compile(spec, src)
     obj = mujoco.mjtObj
@@ -624,10 +703,12 @@ def load_robot(
     q_max = np.where(limited, model.jnt_range[joint_ids, 1], np.inf)
     tool_site = int(_ids(model, obj.mjOBJ_SITE, (composed.tool_site,))[0])
     if desc.arm.home is not None:
-        q_home, home_source = np.array(desc.arm.home, dtype=float), "description"
+        candidates = [np.array(desc.arm.home, dtype=float)]
+        home_source = "description"
     else:
-        q_home = _home_ik(model, joint_ids, tool_site, q_min, q_max, src)
+        candidates = _home_candidates(model, joint_ids, tool_site, q_min, q_max, src)
         home_source = "ik"
+    q_home = candidates[0]
 
     gripper_acts = _ids(
         model, obj.mjOBJ_ACTUATOR, tuple(GRIPPER_PREFIX + a for a in calib.actuators)
@@ -686,8 +767,10 @@ def load_robot(
             arm_actuator_ids=arm_acts,
             q_home=q_home,
             home_source=home_source,
+            home_candidates=tuple(candidates),
             gripper_actuator_ids=gripper_acts,
             gripper_joint_ids=gripper_joints,
+            gripper_kind=_gripper_kind(model, gripper_joints, composed.gripper),
             open_command=calib.open_command.copy(),
             closed_command=calib.closed_command.copy(),
             open_width=calib.open_width,
@@ -703,7 +786,7 @@ def load_robot(
                 model.sensor_adr[sensors[0]].copy(),
                 model.sensor_adr[sensors[1]].copy(),
             ),
-            pad_force_slots=PAD_SENSOR_SLOTS,
+            pad_force_slots=pad_slots,
             tool_site_name=composed.tool_site,
             tool_site_id=tool_site,
             tool_body_id=tool_body,

@@ -24,8 +24,10 @@ import mujoco
 
 from pickplace.controllers import CONTROLLERS, make_controller
 from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.loader import load_scene
 from pickplace.planner import Candidate, PlanningReport
 from pickplace.preflight import Preflight, PreflightConfig
+from pickplace.robot import DEFAULT_ROBOT, DEFAULT_WORLD
 from pickplace.scenarios import (
     BrickPlacement,
     BuildRequest,
@@ -33,7 +35,7 @@ from pickplace.scenarios import (
     check_brick_in_source_bin,
     get_scenario,
 )
-from pickplace.scene import Scene, load_scene
+from pickplace.scene import Scene, parse_scene
 from pickplace.sim import SimConfig, Simulation, TickObserver
 from pickplace.task import Task
 from pickplace.timing import TimingConfig
@@ -63,7 +65,9 @@ class RunRequest:
         controller: Controller name.
         seed: Seed of randomised scenarios (≥ 0).
         brick: Brick start pose override (x, y [m], yaw [rad]) in bin 1.
-        scene_path: Scene file; default ``scenes/scene.xml``.
+        scene_path: World file (bins, brick, floor, lights, cameras, physics options) the
+            robot is composed into; default ``scenes/world.xml``.
+        robot: A bundled robot's name or a ``robot.toml`` path.
         record: ``.rrd`` file to write.
         spawn: Stream to a newly spawned Rerun viewer.
         connect: Stream to a running Rerun viewer at this URL.
@@ -78,6 +82,7 @@ class RunRequest:
     seed: int = 0
     brick: BrickPlacement | None = None
     scene_path: Path | None = None
+    robot: str = DEFAULT_ROBOT
     record: Path | None = None
     spawn: bool = False
     connect: str | None = None
@@ -306,7 +311,9 @@ def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, 
     """Validate ``req``, load the scene and build the scenario's task (planning included).
 
     Raises:
-        PickPlaceError: Any invalid input (see :func:`validate_request`) or a bad scene file;
+        PickPlaceError: Any invalid input (see :func:`validate_request`), a bad world file or
+            robot description (:class:`~pickplace.errors.RobotError`: the file, the field and
+            what would be valid);
             a ``--brick`` pose outside bin 1, or one for which no candidate plan is feasible
             (field ``brick``: the message gives the first candidate's problem and what would
             help).
@@ -323,10 +330,12 @@ def _scene_and_task(
 ) -> tuple[Scene, Task, float]:
     """The scene (its timestep checked), the control rate resolved against it, and the
     scenario's task; see :func:`build_task`."""
-    scene = load_scene(req.scene_path)
-    timestep = float(scene.model.opt.timestep)
+    # The world's timestep first: the robot is composed and calibrated at it.
+    world = req.scene_path if req.scene_path is not None else DEFAULT_WORLD
+    timestep = float(parse_scene(Path(world)).option.timestep)
     check_timestep(req.scene_path, timestep)
     rate = resolve_control_rate(req.control_rate_hz, timestep)
+    scene = load_scene(req.scene_path, req.robot)
     if req.brick is not None:
         check_brick_in_source_bin(scene, req.brick)
     task = scenario.build(
@@ -378,8 +387,8 @@ def prepare(req: RunRequest) -> tuple[Scene, Task, Simulation]:
     """Validate ``req`` and build the simulation (nothing stepped yet, no output opened: a
     recorder among the observers opens its outputs when the run starts).
 
-    MuJoCo's warnings while compiling the scene (e.g. an attached file with another timestep)
-    become ``mujoco-warning`` events at tick 0 instead of lines on stderr.
+    MuJoCo's warnings while composing and compiling the scene become ``mujoco-warning``
+    events at tick 0 instead of lines on stderr.
 
     Raises:
         PickPlaceError: Any invalid input (see :func:`validate_request`), a bad scene file or

@@ -23,7 +23,7 @@ from pickplace.geometry import box_corners, transform_points
 from pickplace.goals import PlaceGoal, ReachGoal
 from pickplace.grasp import brick_pose, top_down_rotation, yaw_of
 from pickplace.kinematics import ArmKinematics
-from pickplace.plan import Plan, PlanConfig, Waypoint, time_keyframes
+from pickplace.plan import Plan, PlanConfig, Waypoint, for_gripper, time_keyframes
 from pickplace.planner import PickPlacePlanner
 from pickplace.scene import Scene
 from pickplace.task import Fault, Task
@@ -139,37 +139,116 @@ def pick_place_task(
     )
 
 
+@dataclass(frozen=True)
+class ArmReach:
+    """Where the arm is fully stretched with the tool pointing down, from its kinematic chain.
+
+    Attributes:
+        shoulder: Index of the shoulder joint: the first arm joint whose axis, with every joint
+            at 0, is perpendicular to the base joint's axis.
+        elbow: The next joint whose axis is parallel to the shoulder's (then).
+        wrist: The next one after the elbow.
+        stretch: Longest distance between the shoulder's and the wrist's axes, across them:
+            the elbow straight (upper arm plus forearm, measured at q = 0 between the joint
+            anchors, without their components along the axes) [m].
+    """
+
+    shoulder: int
+    elbow: int
+    wrist: int
+    stretch: float
+
+
+_AXIS_TOLERANCE = 1e-6  # |cos| of axes counted perpendicular (below) or parallel (above 1 - it)
+
+
+def arm_reach(scene: Scene) -> ArmReach:
+    """The arm's shoulder, elbow and wrist joints and its stretch (see :class:`ArmReach`).
+
+    Raises:
+        PlanError: The arm has no three such joints (it cannot be stretched by a pitch chain).
+    """
+    kin = ArmKinematics(scene)
+    kin.update(np.zeros(scene.n_joints))
+    axes, anchors = kin.data.xaxis, kin.data.xanchor  # the arm model's joints are the arm's
+    base = axes[0]
+    pitch = [j for j in range(1, scene.n_joints) if abs(axes[j] @ base) < _AXIS_TOLERANCE]
+    chain = [j for j in pitch if abs(axes[j] @ axes[pitch[0]]) > 1.0 - _AXIS_TOLERANCE]
+    if len(chain) < 3:
+        raise PlanError(
+            f"the arm has {len(chain)} parallel joints across its base axis ("
+            f"{', '.join(scene.arm_joint_names[j] for j in chain) or 'none'}); valid for "
+            f"singular-reach: an arm with shoulder, elbow and wrist joints"
+        )
+    s, e, w = chain[:3]
+    a = axes[s]
+
+    def across(v: np.ndarray) -> float:
+        return float(np.linalg.norm(v - (v @ a) * a))
+
+    return ArmReach(s, e, w, across(anchors[e] - anchors[s]) + across(anchors[w] - anchors[e]))
+
+
+def full_stretch_distance(scene: Scene, z_tool: float) -> float:
+    """Horizontal distance from the base axis of the tool, pointing down at height ``z_tool``
+    [m], with the arm fully stretched in the vertical plane of its pitch joints [m].
+
+    The arm's plane and the tool's offsets from the wrist are taken at the home posture (the
+    tool pointing down): the wrist sits at the tool's height plus its offset above it, at the
+    stretch from the shoulder; the tool's offset along the pitch axes (e.g. a UR's wrist) moves
+    it sideways out of the plane.
+    """
+    reach = arm_reach(scene)
+    kin = ArmKinematics(scene)
+    kin.update(scene.q_home)
+    d = kin.data
+    a = d.xaxis[reach.shoulder].copy()  # the pitch axis at home (horizontal)
+    p_base, p_shoulder = scene.p_W_base, d.xanchor[reach.shoulder]
+    p_wrist, p_tool = d.xanchor[reach.wrist], kin.p_WG()
+    u = np.cross(a, [0.0, 0.0, 1.0])  # horizontal, across the pitch axis: the arm's radial axis
+    u /= np.linalg.norm(u)
+    if (p_tool - p_base) @ u < 0.0:
+        u = -u
+    wrist_to_tool = p_tool - p_wrist
+    z_wrist = z_tool - wrist_to_tool[2]
+    rise = z_wrist - p_shoulder[2]
+    if abs(rise) >= reach.stretch:
+        raise PlanError(
+            f"the wrist cannot reach height {z_wrist:.3f} m from the shoulder at "
+            f"{p_shoulder[2]:.3f} m (stretch {reach.stretch:.3f} m); valid: a lower tool height"
+        )
+    r_wrist = (p_shoulder - p_base) @ u + math.sqrt(reach.stretch**2 - rise**2)
+    r_tool = r_wrist + wrist_to_tool @ u
+    sideways = (p_tool - p_base) @ a
+    return math.hypot(r_tool, sideways)
+
+
 def singular_reach_task(req: BuildRequest, plan: PlanConfig | None = None) -> Task:
     """A straight radial line that pulls the tool past full stretch and back (seed 000).
 
-    The line runs along +y (away from both bins) at a height of 0.30 m with the tool pointing
-    down. Its far end lies ``REACH_OVERSHOOT`` beyond the arm's reach, computed from the
-    kinematics: the wrist centre (joint 6) sits above the tool by the flange-to-tool length
-    and can be at most upper arm + forearm (0.42 + 0.40 m) from the shoulder (joint 2).
+    The line runs along +y from the base axis (away from both bins) at a height of 0.30 m with
+    the tool pointing down. Its far end lies ``REACH_OVERSHOOT`` beyond the arm's reach there,
+    computed from the kinematic chain (:func:`full_stretch_distance`: the wrist can be at
+    most upper arm plus forearm from the shoulder, and the tool hangs below it as at home).
     """
     scene = req.scene
-    plan = plan or PlanConfig()
+    plan = for_gripper(plan or PlanConfig(), scene.robot.calibration)
     kin = ArmKinematics(scene)
     kin.update(scene.q_home)
     X_home = kin.X_WG()
-    kin.update(np.zeros(7))
-    data, model = kin.data, kin.model
-    p_shoulder = data.xpos[model.body("link2").id].copy()
-    p_wrist = data.xpos[model.body("link6").id].copy()
-    p_elbow = data.xpos[model.body("link4").id].copy()
-    wrist_to_tool = float(np.linalg.norm(kin.p_WG() - p_wrist))
-    reach = float(np.linalg.norm(p_elbow - p_shoulder) + np.linalg.norm(p_wrist - p_elbow))
     z_tool = 0.30
-    dz = z_tool + wrist_to_tool - p_shoulder[2]
-    r_far = math.sqrt(reach**2 - dz**2) + REACH_OVERSHOOT
-    # Keep the tool's yaw relative to the base as at home, so joint 7 does not wind up while
-    # joint 1 swings from the home direction to the line's direction (+y).
-    p_home = X_home.translation()
+    r_far = full_stretch_distance(scene, z_tool) + REACH_OVERSHOOT
+    # Keep the tool's yaw relative to the base as at home, so the last joint does not wind up
+    # while the base swings from the home direction to the line's direction (+y).
+    base = scene.p_W_base
+    p_home = X_home.translation() - base
     swing = math.pi / 2 - math.atan2(p_home[1], p_home[0])
     R = top_down_rotation(yaw_of(X_home.rotation()) + swing)
-    via = SE3.from_rotation_and_translation(R, np.array([0.35, 0.35, z_tool]))
-    near = SE3.from_rotation_and_translation(R, np.array([0.0, 0.45, z_tool]))
-    far = SE3.from_rotation_and_translation(R, np.array([0.0, r_far, z_tool]))
+
+    def at(x: float, y: float) -> SE3:
+        return SE3.from_rotation_and_translation(R, np.array([base[0] + x, base[1] + y, z_tool]))
+
+    via, near, far = at(0.35, 0.35), at(0.0, 0.45), at(0.0, r_far)
     w = plan.open_width
     waypoints = [
         Waypoint("initial", X_home, w),
@@ -281,8 +360,9 @@ def _with_fault(fault: Callable[[Scene], Fault]) -> Builder:
 
 
 def _unreachable(req: BuildRequest) -> Task:
-    # A place target 1.6 m out along +x: well beyond the arm's 1.3 m reach; executed without
-    # the pre-flight, which would refuse it (``pickplace plan --scenario fault-unreachable``).
+    # A place target 1.6 m out along +x: beyond the reach of every bundled arm (the iiwa's is
+    # 1.3 m); executed without the pre-flight, which would refuse it (``pickplace plan
+    # --scenario fault-unreachable``).
     goal = BrickPlacement(1.6, 0.0, 0.0)
     placement = req.brick or nominal_placement(req.scene)
     return pick_place_task(req, placement, goal=goal, preflight=False)
@@ -311,7 +391,7 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "fault-gripper-disabled",
-            "the gripper actuator never closes -> missed-grasp",
+            "the gripper's actuators have no force -> missed-grasp",
             _with_fault(faults.GripperDisabled),
             expected="missed-grasp",
         ),
@@ -323,7 +403,7 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             "fault-heavy-brick",
-            "the brick weighs 30 kg, beyond the 40 N grip -> dropped",
+            "the brick weighs 30 kg, more than friction at the pads holds -> dropped",
             _with_fault(faults.HeavyBrick),
             expected="dropped",
         ),

@@ -1,14 +1,19 @@
-"""Open a pick-and-place scene and resolve the named handles the pipeline needs.
+"""The scene a run simulates: a world with a robot composed into it, and the handles it needs.
 
-The scene contract (names a scene file must define) is :class:`SceneNames`; its defaults match
-``scenes/scene.xml``. Every missing name raises :class:`~pickplace.errors.UnknownNameError`
-listing the names of that kind that do exist.
+A scene is a world file — bins, brick, floor, lights, cameras and physics options
+(``scenes/world.xml``) — with a robot composed into it by :mod:`pickplace.robot` (the arm at
+the origin, the gripper on its flange, calibrated in simulation). :func:`build_scene` resolves
+what the pipeline touches: the world's contract (:class:`WorldNames`: the brick and the two
+bins) and everything about the robot, sized from the robot itself (its joints, limits,
+actuators, gripper commands, pads and tool site: :class:`~pickplace.robot.Robot`). It adds one
+robot–world contact sensor per world body. :func:`pickplace.loader.load_scene` is the way to
+get a scene (cached by file content, home posture chosen); every missing world name raises
+:class:`~pickplace.errors.UnknownNameError` listing the names of that kind that do exist.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
 
 import mujoco
@@ -16,19 +21,21 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.errors import SceneError, UnknownNameError
+from pickplace.robot import Composition, Robot
+from pickplace.robot_physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 
-
-def _scenes_dir() -> Path:
-    """``scenes/`` of a source checkout, or the copy installed as ``pickplace/scenes``."""
-    here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "scenes", here / "scenes"):
-        if (candidate / "scene.xml").is_file():
-            return candidate
-    return here.parent / "scenes"
-
-
-SCENES_DIR = _scenes_dir()
-DEFAULT_SCENE = SCENES_DIR / "scene.xml"
+__all__ = [
+    "ROBOT_CONAFFINITY",
+    "ROBOT_CONTYPE",
+    "BinGeometry",
+    "Contact",
+    "Scene",
+    "WorldNames",
+    "build_scene",
+    "name_to_id",
+    "names_of",
+    "parse_scene",
+]
 
 _OBJ_KIND = {
     mujoco.mjtObj.mjOBJ_JOINT: "joint",
@@ -36,7 +43,6 @@ _OBJ_KIND = {
     mujoco.mjtObj.mjOBJ_SITE: "site",
     mujoco.mjtObj.mjOBJ_BODY: "body",
     mujoco.mjtObj.mjOBJ_GEOM: "geom",
-    mujoco.mjtObj.mjOBJ_NUMERIC: "custom numeric",
     mujoco.mjtObj.mjOBJ_KEY: "keyframe",
     mujoco.mjtObj.mjOBJ_SENSOR: "sensor",
 }
@@ -47,23 +53,17 @@ _OBJ_COUNT = {
     mujoco.mjtObj.mjOBJ_SITE: "nsite",
     mujoco.mjtObj.mjOBJ_BODY: "nbody",
     mujoco.mjtObj.mjOBJ_GEOM: "ngeom",
-    mujoco.mjtObj.mjOBJ_NUMERIC: "nnumeric",
     mujoco.mjtObj.mjOBJ_KEY: "nkey",
     mujoco.mjtObj.mjOBJ_SENSOR: "nsensor",
 }
-
-# The contype bit every robot collision geom (arm and gripper) carries; world geoms (bins,
-# floor, brick) have conaffinity with it, robot geoms do not, so the robot never collides
-# with itself.
-ROBOT_CONTYPE = 2
 
 # Contact sensor fields the loop reads (bits of sensor_intprm[0]).
 _CONTACT_FOUND = 1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)
 _CONTACT_FORCE = 1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE)
 # sensor_intprm[1] of a contact sensor that keeps the contact with the largest force.
 _REDUCE_MAXFORCE = 2
-# Names of the robot-world contact sensors load_scene adds, one per world body.
 ROBOT_WORLD_SENSOR_PREFIX = "robot_world/"
+"""Names of the robot-world contact sensors :func:`build_scene` adds, one per world body."""
 
 
 def names_of(model: mujoco.MjModel, obj: mujoco.mjtObj) -> list[str]:
@@ -86,24 +86,25 @@ def name_to_id(model: mujoco.MjModel, obj: mujoco.mjtObj, name: str) -> int:
 
 
 @dataclass(frozen=True)
-class SceneNames:
-    """Names a pick-and-place scene must define (defaults: ``scenes/scene.xml``)."""
+class WorldNames:
+    """Names a world file must define (defaults: ``scenes/world.xml``).
 
-    arm_joints: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
-    arm_actuators: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
-    speed_limits: str = "arm_joint_speed_limits"
-    accel_limits: str = "arm_joint_accel_limits"
-    gripper_actuator: str = "wsg50/fingers"
-    finger_joints: tuple[str, str] = ("wsg50/left_finger", "wsg50/right_finger")
-    pad_geoms: tuple[str, str] = ("wsg50/left_pad", "wsg50/right_pad")
-    pad_force_sensors: tuple[str, str] = ("left_pad_force", "right_pad_force")
-    tool_site: str = "wsg50/tool"
-    flange_site: str = "attachment_site"
+    The world also carries a site ``home_tool`` where a robot without a home posture is sent
+    by IK (:data:`pickplace.robot.HOME_TOOL_SITE`), and, for the ``fault-obstacle`` scenario,
+    a mocap body ``obstacle`` (:class:`pickplace.faults.Obstacle`).
+
+    Attributes:
+        brick_body: The brick's body (with a free joint).
+        brick_geom: The brick's box geom (the gripper is calibrated on its size).
+        source_bin: The bin the brick starts in: a body with a floor geom ``<bin>_floor`` and
+            four box walls.
+        target_bin: The bin it must end in, alike.
+    """
+
     brick_body: str = "brick"
     brick_geom: str = "brick"
     source_bin: str = "bin1"
     target_bin: str = "bin2"
-    home_key: str = "home"
 
 
 @dataclass(frozen=True)
@@ -199,35 +200,25 @@ def _bin_geometry(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> BinG
 
 @dataclass(frozen=True)
 class Scene:
-    """A compiled scene and the ids of everything the pipeline touches.
+    """A compiled scene, the robot in it and the ids of everything the pipeline touches.
+
+    The robot's arrays are sized by the robot: ``n`` arm joints (:attr:`n_joints`), as many
+    gripper actuators and joints as its gripper has, any number of pads per side. The model
+    may be changed by faults (a mass, a gain): :func:`pickplace.loader.load_scene` gives every
+    run its own copy; :attr:`arm_model` is shared and never changed.
 
     Attributes:
         model: The compiled MuJoCo model.
-        path: The scene file.
-        names: The names that were resolved.
-        arm_joint_ids: Joint ids of the 7 arm joints, base to flange.
-        arm_qpos_adr: qpos addresses of the arm joints.
-        arm_dof_adr: dof (qvel) addresses of the arm joints.
-        q_min: Lower joint limits [rad].
-        q_max: Upper joint limits [rad].
-        v_max: Joint speed limits [rad/s], from the model's custom numeric data.
-        a_max: Joint acceleration limits [rad/s²], from the model's custom numeric data, or
-            None when the scene gives none.
-        arm_actuator_ids: Position actuators of the arm joints.
-        gripper_actuator_id: Position actuator of the finger gap [m].
-        finger_joint_ids: The two finger joints (slides; gap = sum of their positions).
-        finger_qpos_adr: qpos addresses of the two finger joints (gap = sum) [m].
-        gripper_max_gap: Largest commandable finger gap [m].
-        gripper_force_limit: Actuator force bound = squeeze per jaw [N].
-        finger_outer_offset: Distance from a closed finger's inner pad face to its outer face
-            along the closing axis [m]: an open finger reaches gap/2 + this from the centre.
-        pad_geom_ids: Geoms of the left and right finger pads.
-        pad_force_sensor_adr: sensordata addresses of the left and right pad–brick contact
-            sensors; each holds ``pad_force_slots`` rows of [found, f_normal, f_t1, f_t2]
-            (force on the pad in the contact frame [N]).
-        pad_force_slots: Contacts each pad sensor reports.
-        tool_site_id: Site at the grasp point, z along the approach direction.
-        flange_site_id: Site at the arm's flange.
+        path: The world file.
+        robot: The composed robot (ids refer to ``model``; its ``q_home`` is the scene's home).
+        names: The world names that were resolved.
+        arm_model: The scene with only the arm joints left (nq = nv = n), for the IK; bodies,
+            sites and geometry unchanged, so the tool site's kinematics equal the simulation's.
+        gripper_qpos_adr: qpos addresses of the gripper's joints.
+        pad_force_sensor_adr: sensordata addresses of every pad–brick contact sensor, the
+            +y ("left") side's first; each holds ``pad_force_slots`` rows of
+            [found, f_normal, f_t1, f_t2] (force on the pad in the contact frame [N]).
+        pad_sensor_side: Per pad sensor, 0 for the +y side and 1 for the -y side.
         brick_body_id: Free body of the brick.
         brick_geom_id: Box geom of the brick.
         brick_qpos_adr: First qpos address of the brick's free joint (xyz, wxyz).
@@ -236,41 +227,23 @@ class Scene:
         brick_mass: Mass of the brick [kg].
         source_bin: Bin the brick starts in.
         target_bin: Bin the brick must end in.
-        home_key_id: Keyframe with the arm's home posture.
-        p_W_base: Point on the first arm joint's (vertical) axis, in world [m].
-        robot_root_body_id: The body under the world whose subtree is the robot (arm and
-            gripper).
-        robot_body_mask: Per body, True for the robot's bodies.
+        robot_root_body_ids: The bodies under the world whose subtrees are the robot.
+        robot_body_mask: Per body, True for the robot's bodies (arm and gripper).
         world_contact_body_ids: Bodies outside the robot and the brick that can collide: the
             world the robot must not touch.
         robot_world_sensor_adr: sensordata addresses of the robot-world contact sensors, one
-            per world contact body, each [found, f_normal, f_t1, f_t2] of the contact with
-            the largest force (force on the robot in the contact frame [N]).
-        q_home: Arm joint positions of the home keyframe [rad].
+            per robot root and world contact body, each [found, f_normal, f_t1, f_t2] of the
+            contact with the largest force (force on the robot in the contact frame [N]).
     """
 
     model: mujoco.MjModel
     path: Path
-    names: SceneNames
-    arm_joint_ids: np.ndarray
-    arm_qpos_adr: np.ndarray
-    arm_dof_adr: np.ndarray
-    q_min: np.ndarray
-    q_max: np.ndarray
-    v_max: np.ndarray
-    a_max: np.ndarray | None
-    arm_actuator_ids: np.ndarray
-    gripper_actuator_id: int
-    finger_joint_ids: np.ndarray
-    finger_qpos_adr: np.ndarray
-    gripper_max_gap: float
-    gripper_force_limit: float
-    finger_outer_offset: float
-    pad_geom_ids: tuple[int, int]
-    pad_force_sensor_adr: tuple[int, int]
-    pad_force_slots: int
-    tool_site_id: int
-    flange_site_id: int
+    robot: Robot
+    names: WorldNames
+    arm_model: mujoco.MjModel = field(repr=False, compare=False)
+    gripper_qpos_adr: np.ndarray
+    pad_force_sensor_adr: np.ndarray
+    pad_sensor_side: np.ndarray
     brick_body_id: int
     brick_geom_id: int
     brick_qpos_adr: int
@@ -279,44 +252,170 @@ class Scene:
     brick_mass: float
     source_bin: BinGeometry
     target_bin: BinGeometry
-    home_key_id: int
-    p_W_base: np.ndarray
-    robot_root_body_id: int
+    robot_root_body_ids: np.ndarray
     robot_body_mask: np.ndarray = field(repr=False)
     world_contact_body_ids: np.ndarray
     robot_world_sensor_adr: np.ndarray
-    q_home: np.ndarray = field(repr=False)
 
-    @cached_property
-    def arm_model(self) -> mujoco.MjModel:
-        """The scene compiled with only the arm joints left (nq = nv = 7), for the IK.
+    # ------------------------------------------------------------------ the arm
 
-        Fingers, the brick's free joint and everything that refers to them (actuators,
-        tendons, equalities, sensors, keyframes) are removed; bodies, sites and geometry are
-        unchanged, so the tool site's forward kinematics equal the simulation's. Compiled once
-        per scene and shared (read-only) by every controller and planner.
+    @property
+    def n_joints(self) -> int:
+        """Number of arm joints."""
+        return self.robot.n_joints
+
+    @property
+    def arm_joint_names(self) -> tuple[str, ...]:
+        """Names of the arm joints in the scene, base to flange."""
+        return self.robot.arm_joint_names
+
+    @property
+    def arm_joint_ids(self) -> np.ndarray:
+        """Joint ids of the arm joints, base to flange."""
+        return self.robot.arm_joint_ids
+
+    @property
+    def arm_qpos_adr(self) -> np.ndarray:
+        """qpos addresses of the arm joints."""
+        return self.robot.arm_qpos_adr
+
+    @property
+    def arm_dof_adr(self) -> np.ndarray:
+        """dof (qvel) addresses of the arm joints."""
+        return self.robot.arm_dof_adr
+
+    @property
+    def q_min(self) -> np.ndarray:
+        """Lower joint limits [rad or m]; -inf for continuous joints."""
+        return self.robot.q_min
+
+    @property
+    def q_max(self) -> np.ndarray:
+        """Upper joint limits [rad or m]; +inf for continuous joints."""
+        return self.robot.q_max
+
+    @property
+    def v_max(self) -> np.ndarray:
+        """Joint speed limits [rad/s or m/s], from the robot description."""
+        return self.robot.v_max
+
+    @property
+    def a_max(self) -> np.ndarray | None:
+        """Joint acceleration limits [rad/s²], from the robot description, or None."""
+        return self.robot.a_max
+
+    @property
+    def arm_actuator_ids(self) -> np.ndarray:
+        """Position actuator of each arm joint."""
+        return self.robot.arm_actuator_ids
+
+    @property
+    def q_home(self) -> np.ndarray:
+        """Home posture of the arm (the ``home`` keyframe's) [rad]."""
+        return self.robot.q_home
+
+    @property
+    def home_key_id(self) -> int:
+        """Keyframe with the home posture, the gripper open."""
+        return self.robot.home_key_id
+
+    @property
+    def p_W_base(self) -> np.ndarray:
+        """Anchor of the first arm joint (the base axis) in world [m]."""
+        return self.robot.p_W_base
+
+    @property
+    def tool_site_id(self) -> int:
+        """Calibrated tool site: z along the approach, y along the closing axis."""
+        return self.robot.tool_site_id
+
+    @property
+    def tool_site_name(self) -> str:
+        """Name of the tool site."""
+        return self.robot.tool_site_name
+
+    # ------------------------------------------------------------------ the gripper
+
+    @property
+    def gripper_actuator_ids(self) -> np.ndarray:
+        """The gripper's actuators (order of :meth:`ctrl_for_width`)."""
+        return self.robot.gripper_actuator_ids
+
+    @property
+    def gripper_joint_ids(self) -> np.ndarray:
+        """The gripper's joints (order of :meth:`gripper_qpos_for_width`)."""
+        return self.robot.gripper_joint_ids
+
+    @property
+    def gripper_open_width(self) -> float:
+        """Pad gap at the open command [m] (calibrated)."""
+        return self.robot.open_width
+
+    @property
+    def squeeze_force(self) -> float:
+        """Squeeze per jaw [N] a grasp is judged against: measured in calibration, or the
+        description's ``grip_force``."""
+        return self.robot.squeeze_force
+
+    @property
+    def pad_geom_ids(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pad geoms of the +y ("left") and the -y ("right") side of the tool frame."""
+        return self.robot.pad_geom_ids
+
+    @property
+    def pad_force_slots(self) -> int:
+        """Contacts each pad sensor reports."""
+        return self.robot.pad_force_slots
+
+    def ctrl_for_width(self, width: float) -> np.ndarray:
+        """Gripper command (one value per gripper actuator) for a pad gap of ``width`` [m];
+        at or below the closed width the closed command (full squeeze on an object)."""
+        return self.robot.ctrl_for_width(width)
+
+    def ctrl_for_widths(self, widths: np.ndarray) -> np.ndarray:
+        """:meth:`ctrl_for_width` of each of ``widths`` (k,), shape (k, gripper actuators)."""
+        return self.robot.ctrl_for_widths(widths)
+
+    def gripper_qpos_for_width(self, width: float) -> np.ndarray:
+        """Gripper joint positions of the free fingers at gap ``width`` [m], for
+        :attr:`gripper_qpos_adr` (what a kinematic copy of the scene sets)."""
+        return self.robot.qpos_for_width(width)
+
+    def gripper_gap(self, data: mujoco.MjData) -> float:
+        """Gap between the innermost pad faces along the tool's y axis [m], now."""
+        return self.robot.gap(data)
+
+    def gripper_gaps(
+        self, body_pos: np.ndarray, body_quat: np.ndarray, R_WG: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The pad gap [m] from logged body poses (..., nbody, 3) and (..., nbody, 4, wxyz),
+        vectorised over the leading axes; ``R_WG`` (..., 3, 3), the tool site's rotation at
+        the same state, if known, saves computing the closing axis."""
+        y_W = None if R_WG is None else R_WG[..., :, 1]
+        return self.robot.gap_from_body_poses(body_pos, body_quat, y_W)
+
+    def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
+        """The pad sensors' contact slots from sensordata of shape (..., nsensordata).
+
+        Returns:
+            Shape (..., sensors, pad_force_slots, 4): one row per contact slot of
+            [found, f_normal, f_t1, f_t2] (contact count; force on the pad in the contact
+            frame [N]; unused slots are zero), sensors in :attr:`pad_force_sensor_adr` order.
         """
-        spec = mujoco.MjSpec.from_file(str(self.path))
-        for collection in (
-            "actuators",
-            "tendons",
-            "equalities",
-            "sensors",
-            "keys",
-            "pairs",
-            "excludes",
-        ):
-            for element in list(getattr(spec, collection)):
-                spec.delete(element)
-        keep = set(self.names.arm_joints)
-        for joint in list(spec.joints):
-            if joint.name not in keep:
-                spec.delete(joint)
-        model = spec.compile()
-        order = tuple(names_of(model, mujoco.mjtObj.mjOBJ_JOINT))
-        if order != self.names.arm_joints:
-            raise SceneError(f"arm joints {order} are not in the order {self.names.arm_joints}")
-        return model
+        n = 4 * self.pad_force_slots
+        rows = [sensordata[..., a : a + n] for a in self.pad_force_sensor_adr.tolist()]
+        shape = (*sensordata.shape[:-1], len(rows), self.pad_force_slots, 4)
+        return np.stack(rows, axis=-2).reshape(shape)
+
+    def pad_normal_forces(self, sensordata: np.ndarray) -> np.ndarray:
+        """Normal force [N] of the brick on the +y and the -y pads, shape (..., 2), from
+        sensordata of shape (..., nsensordata)."""
+        per_sensor = self.pad_sensor_rows(sensordata)[..., 1].sum(axis=-1)
+        sides = np.zeros((len(self.pad_sensor_side), 2))
+        sides[np.arange(len(self.pad_sensor_side)), self.pad_sensor_side] = 1.0
+        return np.asarray(per_sensor @ sides)
+
+    # ------------------------------------------------------------------ the world
 
     @property
     def brick_width(self) -> float:
@@ -358,45 +457,11 @@ class Scene:
         """Name of geom ``geom_id`` (``geom<id>`` when it has none)."""
         return mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, geom_id) or f"geom{geom_id}"
 
-    @property
-    def arm_joint_names(self) -> tuple[str, ...]:
-        """Names of the arm joints, base to flange."""
-        return self.names.arm_joints
-
-    def finger_gap(self, qpos: np.ndarray) -> np.ndarray:
-        """Finger gap [m] (sum of the two finger joints) from qpos of shape (..., nq)."""
-        a, b = self.finger_qpos_adr
-        return np.asarray(qpos[..., a] + qpos[..., b])
-
-    def finger_qpos(self, width: float) -> np.ndarray:
-        """Finger joint positions [m] that open the gap to ``width`` [m] (each finger takes half
-        of it, within its range): the values for :attr:`finger_qpos_adr`."""
-        half = 0.5 * float(width)
-        lo, hi = self.model.jnt_range[self.finger_joint_ids].T
-        return np.clip(np.full(len(self.finger_joint_ids), half), lo, hi)
-
-    def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
-        """The pad sensors' contact slots from sensordata of shape (..., nsensordata).
-
-        Returns:
-            Shape (..., 2, pad_force_slots, 4): left and right pad, one row per contact slot of
-            [found, f_normal, f_t1, f_t2] (contact count; force on the pad in the contact
-            frame [N]; unused slots are zero).
-        """
-        n = 4 * self.pad_force_slots
-        rows = [sensordata[..., a : a + n] for a in self.pad_force_sensor_adr]
-        return np.stack(rows, axis=-2).reshape(*sensordata.shape[:-1], 2, self.pad_force_slots, 4)
-
-    def pad_normal_forces(self, sensordata: np.ndarray) -> np.ndarray:
-        """Normal force [N] of the brick on the left and right pad, shape (..., 2), from
-        sensordata of shape (..., nsensordata)."""
-        return self.pad_sensor_rows(sensordata)[..., 1].sum(axis=-1)
-
     def set_brick_pose(self, data: mujoco.MjData, X_WO: SE3) -> None:
         """Write the brick's pose ``X_WO`` into ``data.qpos`` (call mj_forward afterwards)."""
         adr = self.brick_qpos_adr
         data.qpos[adr : adr + 3] = X_WO.translation()
-        data.qpos[adr + 3 : adr + 7] = X_WO.rotation().wxyz
+        data.qpos[adr + 3 : adr + 7] = X_WO.rotation().wxyz  # position and quaternion
 
     def make_data(self) -> mujoco.MjData:
         """Return fresh MjData reset to the home keyframe."""
@@ -406,61 +471,13 @@ class Scene:
         return data
 
 
-def _finger_outer_offset(model: mujoco.MjModel, finger_joint: int) -> float:
-    """Outer extent of a finger's box geoms along its joint axis, from the joint's zero [m]."""
-    body = model.jnt_bodyid[finger_joint]
-    axis = model.jnt_axis[finger_joint]
-    extent = 0.0
-    for g in range(model.ngeom):
-        if model.geom_bodyid[g] == body and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
-            extent = max(
-                extent, float(model.geom_pos[g] @ axis + np.abs(axis) @ model.geom_size[g])
-            )
-    return extent
-
-
-def _pad_force_sensors(
-    model: mujoco.MjModel, names: SceneNames, pad_ids: tuple[int, int], brick_geom: int
-) -> tuple[tuple[int, int], int]:
-    """sensordata addresses of the two pad-force sensors and their number of contact slots.
-
-    Raises:
-        UnknownNameError: A sensor is missing.
-        SceneError: A sensor is not a ``found force`` contact sensor between its pad and the
-            brick, or the two report different numbers of contacts.
-    """
-    adr: list[int] = []
-    slots: list[int] = []
-    for name, pad in zip(names.pad_force_sensors, pad_ids, strict=True):
-        i = name_to_id(model, mujoco.mjtObj.mjOBJ_SENSOR, name)
-        fields, num = int(model.sensor_intprm[i, 0]), int(model.sensor_intprm[i, 2])
-        geoms = {int(model.sensor_objid[i]), int(model.sensor_refid[i])}
-        if (
-            model.sensor_type[i] != mujoco.mjtSensor.mjSENS_CONTACT
-            or fields != _CONTACT_FOUND | _CONTACT_FORCE
-            or model.sensor_objtype[i] != mujoco.mjtObj.mjOBJ_GEOM
-            or model.sensor_reftype[i] != mujoco.mjtObj.mjOBJ_GEOM
-            or geoms != {pad, brick_geom}
-        ):
-            pad_name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, pad)
-            raise SceneError(
-                f"sensor '{name}' must be <contact geom1=\"{pad_name}\" "
-                f'geom2="{names.brick_geom}" data="found force" num="N"/>'
-            )
-        adr.append(int(model.sensor_adr[i]))
-        slots.append(num)
-    if slots[0] != slots[1]:
-        raise SceneError(f"pad force sensors report different numbers of contacts: {slots}")
-    return (adr[0], adr[1]), slots[0]
-
-
 def parse_scene(path: Path) -> mujoco.MjSpec:
-    """Parse an MJCF file into a spec, turning every failure into a :class:`SceneError`."""
+    """Parse a world file into a spec, turning every failure into a :class:`SceneError`."""
     path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
     if not path.exists():
-        raise SceneError(f"scene file '{path}' does not exist")
+        raise SceneError(f"scene file '{path}' does not exist; valid: an MJCF world file")
     if not path.is_file():
-        raise SceneError(f"scene path '{path}' is not a file")
+        raise SceneError(f"scene path '{path}' is not a file; valid: an MJCF world file")
     try:
         return mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
@@ -468,108 +485,61 @@ def parse_scene(path: Path) -> mujoco.MjSpec:
         raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
 
 
-def _compile(spec: mujoco.MjSpec, path: Path) -> mujoco.MjModel:
-    try:
-        return spec.compile()
-    except ValueError as exc:  # MuJoCo reports compile errors as ValueError.
-        detail = " ".join(str(exc).split())
-        raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
-
-
-def compile_scene(path: Path) -> mujoco.MjModel:
-    """Compile an MJCF file, turning every failure into a :class:`SceneError`."""
-    return _compile(parse_scene(path), path.resolve())
-
-
-def _robot_root(model: mujoco.MjModel, joint_id: int) -> int:
-    """The body under the world whose subtree holds joint ``joint_id`` (the robot's root)."""
-    return int(model.body_rootid[model.jnt_bodyid[joint_id]])
-
-
-def _world_contact_bodies(model: mujoco.MjModel, robot_root: int, brick_body: int) -> list[int]:
+def _world_contact_bodies(model: mujoco.MjModel, robot: np.ndarray, brick_body: int) -> list[int]:
     """Bodies outside the robot and the brick that have geoms: the world the robot must not
     touch (the world body's floor, the bins, an obstacle a fault may bring in)."""
-    out = []
-    for b in range(model.nbody):
-        if (b and model.body_rootid[b] == robot_root) or b == brick_body:
-            continue
-        if np.any(model.geom_bodyid == b):
-            out.append(b)
-    return out
+    has_geom = np.zeros(model.nbody, dtype=bool)
+    has_geom[model.geom_bodyid] = True
+    return [b for b in range(model.nbody) if has_geom[b] and not robot[b] and b != brick_body]
 
 
 def _add_robot_world_sensors(
-    spec: mujoco.MjSpec, model: mujoco.MjModel, robot_root: int, bodies: list[int]
+    spec: mujoco.MjSpec, model: mujoco.MjModel, roots: np.ndarray, bodies: list[int]
 ) -> list[str]:
-    """One contact sensor per world body: the robot's subtree against that body, reporting
-    the number of contacts and the largest normal force (``found force``, ``maxforce``)."""
+    """One contact sensor per robot root and world body: the root's subtree against that body,
+    reporting the number of contacts and the largest normal force (``found force``,
+    ``maxforce``)."""
     names = []
-    root = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, robot_root)
-    for b in bodies:
-        body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or "world"
-        name = f"{ROBOT_WORLD_SENSOR_PREFIX}{body}"
-        spec.add_sensor(
-            name=name,
-            type=mujoco.mjtSensor.mjSENS_CONTACT,
-            objtype=mujoco.mjtObj.mjOBJ_XBODY,  # subtree of the robot's root
-            objname=root,
-            reftype=mujoco.mjtObj.mjOBJ_BODY,
-            refname=body,
-            intprm=[_CONTACT_FOUND | _CONTACT_FORCE, _REDUCE_MAXFORCE, 1],
-        )
-        names.append(name)
+    taken = {s.name for s in spec.sensors}
+    for root_id in roots.tolist():
+        root = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, root_id)
+        for b in bodies:
+            body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or "world"
+            name = f"{ROBOT_WORLD_SENSOR_PREFIX}{body}"
+            if len(roots) > 1:
+                name += f"/{root}"
+            if name in taken:
+                raise SceneError(f"the world already has a sensor '{name}'; valid: another name")
+            spec.add_sensor(
+                name=name,
+                type=mujoco.mjtSensor.mjSENS_CONTACT,
+                objtype=mujoco.mjtObj.mjOBJ_XBODY,  # subtree of the robot's root
+                objname=root,
+                reftype=mujoco.mjtObj.mjOBJ_BODY,
+                refname=body,
+                intprm=[_CONTACT_FOUND | _CONTACT_FORCE, _REDUCE_MAXFORCE, 1],
+            )
+            names.append(name)
     return names
 
 
-def load_scene(path: str | Path | None = None, names: SceneNames | None = None) -> Scene:
-    """Compile a scene file and resolve every handle of the scene contract.
+def build_scene(composition: Composition, path: Path, names: WorldNames | None = None) -> Scene:
+    """Resolve a composed scene: the world's names, the robot, the robot–world sensors.
 
     Args:
-        path: MJCF file; default ``scenes/scene.xml``.
-        names: Names to resolve; default :class:`SceneNames`.
+        composition: The world with the robot composed into it (:func:`pickplace.robot.load_robot`);
+            its spec is copied, not changed.
+        path: The world file (reported in the scene).
+        names: World names to resolve; default :class:`WorldNames`.
 
     Raises:
-        SceneError: The file is missing, not valid MJCF or structurally wrong.
-        UnknownNameError: A required name is missing (the message lists those that exist).
+        SceneError: The brick or a bin is structurally wrong, or the scene does not compile.
+        UnknownNameError: A world name is missing (the message lists those that exist).
     """
-    path = (Path(path) if path is not None else DEFAULT_SCENE).resolve()
-    names = names or SceneNames()
-    spec = parse_scene(path)
-    model = _compile(spec, path)
+    names = names or WorldNames()
+    robot = composition.robot
+    model = composition.model
     obj = mujoco.mjtObj
-
-    joint_ids = np.array([name_to_id(model, obj.mjOBJ_JOINT, j) for j in names.arm_joints])
-    for j, name in zip(joint_ids, names.arm_joints, strict=True):
-        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE or not model.jnt_limited[j]:
-            raise SceneError(f"arm joint '{name}' must be a limited hinge joint")
-    act_ids = np.array([name_to_id(model, obj.mjOBJ_ACTUATOR, a) for a in names.arm_actuators])
-
-    num_id = name_to_id(model, obj.mjOBJ_NUMERIC, names.speed_limits)
-    adr, size = model.numeric_adr[num_id], model.numeric_size[num_id]
-    v_max = np.array(model.numeric_data[adr : adr + size], dtype=float)
-    if v_max.shape != (len(joint_ids),) or np.any(v_max <= 0):
-        raise SceneError(
-            f"custom numeric '{names.speed_limits}' must hold {len(joint_ids)} positive joint "
-            f"speed limits [rad/s], got {v_max.tolist()}"
-        )
-
-    a_max = None
-    acc_id = mujoco.mj_name2id(model, obj.mjOBJ_NUMERIC, names.accel_limits)
-    if acc_id >= 0:
-        adr, size = model.numeric_adr[acc_id], model.numeric_size[acc_id]
-        a_max = np.array(model.numeric_data[adr : adr + size], dtype=float)
-        if a_max.shape != (len(joint_ids),) or np.any(a_max <= 0):
-            raise SceneError(
-                f"custom numeric '{names.accel_limits}' must hold {len(joint_ids)} positive "
-                f"joint acceleration limits [rad/s²], got {a_max.tolist()}"
-            )
-
-    grip_id = name_to_id(model, obj.mjOBJ_ACTUATOR, names.gripper_actuator)
-    finger_ids = [name_to_id(model, obj.mjOBJ_JOINT, j) for j in names.finger_joints]
-    pad_ids = (
-        name_to_id(model, obj.mjOBJ_GEOM, names.pad_geoms[0]),
-        name_to_id(model, obj.mjOBJ_GEOM, names.pad_geoms[1]),
-    )
     brick_body = name_to_id(model, obj.mjOBJ_BODY, names.brick_body)
     brick_geom = name_to_id(model, obj.mjOBJ_GEOM, names.brick_geom)
     brick_jnt = int(model.body_jntadr[brick_body])
@@ -577,44 +547,35 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         raise SceneError(f"brick body '{names.brick_body}' must have a free joint")
     if model.geom_type[brick_geom] != mujoco.mjtGeom.mjGEOM_BOX:
         raise SceneError(f"brick geom '{names.brick_geom}' must be a box")
-    home = name_to_id(model, obj.mjOBJ_KEY, names.home_key)
-    robot_root = _robot_root(model, int(joint_ids[0]))
-    world_bodies = _world_contact_bodies(model, robot_root, brick_body)
-    sensor_names = _add_robot_world_sensors(spec, model, robot_root, world_bodies)
-    model = _compile(spec, path)  # the same model, with the robot-world contact sensors
-    sensor_adr, slots = _pad_force_sensors(model, names, pad_ids, brick_geom)
+    mask = np.zeros(model.nbody, dtype=bool)
+    mask[robot.robot_body_ids] = True
+    roots = np.unique(model.body_rootid[robot.robot_body_ids])
+    world_bodies = _world_contact_bodies(model, mask, brick_body)
+    spec = composition.spec.copy()
+    sensor_names = _add_robot_world_sensors(spec, model, roots, world_bodies)
+    try:
+        model = spec.compile()  # the same model, with the robot-world contact sensors
+    except ValueError as exc:
+        detail = " ".join(str(exc).split())
+        raise SceneError(f"scene file '{path}' with the robot does not compile: {detail}") from exc
     world_sensor_adr = np.array(
         [model.sensor_adr[name_to_id(model, obj.mjOBJ_SENSOR, n)] for n in sensor_names],
         dtype=int,
     )
-
-    data = mujoco.MjData(model)
-    mujoco.mj_resetDataKeyframe(model, data, home)
-    mujoco.mj_forward(model, data)
-    qpos_adr = model.jnt_qposadr[joint_ids].copy()
+    pad_adr = np.concatenate(robot.pad_force_sensor_adr).astype(int)
+    pad_side = np.concatenate(
+        [np.full(len(adr), side, dtype=int) for side, adr in enumerate(robot.pad_force_sensor_adr)]
+    )
+    data = robot.make_data(model)
     return Scene(
         model=model,
         path=path,
+        robot=robot,
         names=names,
-        arm_joint_ids=joint_ids,
-        arm_qpos_adr=qpos_adr,
-        arm_dof_adr=model.jnt_dofadr[joint_ids].copy(),
-        q_min=model.jnt_range[joint_ids, 0].copy(),
-        q_max=model.jnt_range[joint_ids, 1].copy(),
-        v_max=v_max,
-        a_max=a_max,
-        arm_actuator_ids=act_ids,
-        gripper_actuator_id=grip_id,
-        finger_joint_ids=np.array(finger_ids, dtype=int),
-        finger_qpos_adr=model.jnt_qposadr[finger_ids].copy(),
-        gripper_max_gap=float(model.actuator_ctrlrange[grip_id, 1]),
-        gripper_force_limit=float(model.actuator_forcerange[grip_id, 1]),
-        finger_outer_offset=_finger_outer_offset(model, finger_ids[0]),
-        pad_geom_ids=pad_ids,
-        pad_force_sensor_adr=sensor_adr,
-        pad_force_slots=slots,
-        tool_site_id=name_to_id(model, obj.mjOBJ_SITE, names.tool_site),
-        flange_site_id=name_to_id(model, obj.mjOBJ_SITE, names.flange_site),
+        arm_model=composition.arm_model,
+        gripper_qpos_adr=model.jnt_qposadr[robot.gripper_joint_ids].copy(),
+        pad_force_sensor_adr=pad_adr,
+        pad_sensor_side=pad_side,
         brick_body_id=brick_body,
         brick_geom_id=brick_geom,
         brick_qpos_adr=int(model.jnt_qposadr[brick_jnt]),
@@ -623,11 +584,8 @@ def load_scene(path: str | Path | None = None, names: SceneNames | None = None) 
         brick_mass=float(model.body_mass[brick_body]),
         source_bin=_bin_geometry(model, data, names.source_bin),
         target_bin=_bin_geometry(model, data, names.target_bin),
-        home_key_id=home,
-        p_W_base=data.xanchor[joint_ids[0]].copy(),
-        robot_root_body_id=robot_root,
-        robot_body_mask=np.asarray(model.body_rootid == robot_root) & (np.arange(model.nbody) > 0),
+        robot_root_body_ids=roots,
+        robot_body_mask=mask,
         world_contact_body_ids=np.array(world_bodies, dtype=int),
         robot_world_sensor_adr=world_sensor_adr,
-        q_home=data.qpos[qpos_adr].copy(),
     )

@@ -171,8 +171,9 @@ class Simulation:
         self._dynamics = _DynamicsFeedforward(scene.arm_model, kp, self.dt)
         self._use_dynamics = self.config.dynamics_feedforward
         self._zero_qdot = np.zeros(len(act))
-        self._arm_ctrl = _as_slice(scene.arm_actuator_ids)
-        self._gripper_ctrl = scene.gripper_actuator_id
+        # The robot's actuators, arm then gripper: one row of the log's ctrl per tick.
+        self._robot_ctrl = _as_slice(np.concatenate([act, scene.gripper_actuator_ids]))
+        self._ctrl_for_widths = scene.ctrl_for_widths
         self._site = scene.tool_site_id
         self._views = _DataViews(self.data)
         autoreset_off = self.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_AUTORESET
@@ -355,8 +356,16 @@ class Simulation:
 
         Writes the commands into the log and returns the end of the ticks commanded: ``k1``,
         or one past a tick whose joint velocities were not finite (that tick commands no
-        motion and is the last one simulated).
+        motion and is the last one simulated). The gripper's commands for the planned widths
+        are computed for the whole block at once.
         """
+        end = self._arm_commands(k0, k1)
+        log = self.log
+        log.gripper_ctrl[k0:end] = self._ctrl_for_widths(log.gripper_cmd[k0:end])
+        return end
+
+    def _arm_commands(self, k0: int, k1: int) -> int:
+        """The per-tick part of :meth:`_command_ticks`: plan samples and IK."""
         log, dt, ff = self.log, self.dt, self._ff
         sample, command = self._sample, self._command
         segment_index = self.task.trajectory.segment_index
@@ -403,8 +412,7 @@ class Simulation:
             text = fault.apply(self, k)
             if text:
                 self.emit("fault", f"fault '{fault.name}': {text}", level="warn")
-        v.ctrl[self._arm_ctrl] = log.arm_ctrl[k]
-        v.ctrl[self._gripper_ctrl] = log.gripper_cmd[k]
+        v.ctrl[self._robot_ctrl] = log.ctrl[k]
         mujoco.mj_step(self.model, self.data, self.substeps)
         # MuJoCo checks qpos, qvel and qacc every step and resets the data (time back to 0)
         # on a non-finite value, so a clock that stopped advancing means a NaN; only with
@@ -536,6 +544,7 @@ class Simulation:
             planning_time_s=(
                 None if self.task.planning is None else self.task.planning.planning_time_s
             ),
+            robot=self.scene.robot.name,
         )
 
 

@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 
 from pickplace.errors import InvalidInputError
+from pickplace.loader import load_scene
+from pickplace.robot import DEFAULT_ROBOT, resolve_description
 from pickplace.runner import MAX_SEED, RunRequest, run, validate_request
 from pickplace.signals import STOP_SIGNALS, ignore_in_child
 
@@ -55,17 +57,20 @@ def available_cpus() -> int:
 @dataclass(frozen=True)
 class SweepRequest:
     """A sweep: ``trials`` runs of ``scenario`` with seeds ``first_seed …`` on ``workers``
-    processes (default: one per available CPU, see :func:`available_cpus`)."""
+    processes (default: one per available CPU, see :func:`available_cpus`), with ``robot``
+    (a bundled name or a robot.toml)."""
 
     scenario: str = "pick-place-random"
     controller: str = "qp"
     trials: int = 20
     first_seed: int = 0
     workers: int = field(default_factory=available_cpus)
+    robot: str = DEFAULT_ROBOT
 
     def validate(self) -> None:
-        """Raise InvalidInputError / UnknownNameError for an invalid sweep."""
+        """Raise InvalidInputError / UnknownNameError / RobotError for an invalid sweep."""
         validate_request(RunRequest(self.scenario, self.controller, self.first_seed))
+        resolve_description(self.robot)
         if not 1 <= self.trials <= MAX_TRIALS:
             raise InvalidInputError(f"--trials must be in [1, {MAX_TRIALS}], got {self.trials}")
         if self.first_seed + self.trials - 1 > MAX_SEED:
@@ -78,9 +83,12 @@ class SweepRequest:
             )
 
 
-def run_trial(scenario: str, controller: str, seed: int) -> dict[str, Any]:
+def run_trial(
+    scenario: str, controller: str, seed: int, robot: str = DEFAULT_ROBOT
+) -> dict[str, Any]:
     """Run one trial and return its summary without the event list."""
-    summary = run(RunRequest(scenario=scenario, controller=controller, seed=seed)).summary()
+    req = RunRequest(scenario=scenario, controller=controller, seed=seed, robot=robot)
+    summary = run(req).summary()
     summary.pop("events", None)
     return summary
 
@@ -104,6 +112,9 @@ def run_sweep(
     req.validate()
     seeds = [req.first_seed + i for i in range(req.trials)]
     wall0 = time.perf_counter()
+    # Composed and calibrated once, here: forked workers inherit the cached scene (and a bad
+    # robot file is refused before any trial).
+    load_scene(robot=req.robot)
     results: list[dict[str, Any]] = []
 
     def add(entry: dict[str, Any]) -> None:
@@ -115,7 +126,7 @@ def run_sweep(
     try:
         if req.workers == 1:
             for seed in seeds:
-                summary = run_trial(req.scenario, req.controller, seed)
+                summary = run_trial(req.scenario, req.controller, seed, req.robot)
                 if summary["failure"] == "interrupted":  # a stop request, not a result
                     interrupted = True
                     break
@@ -136,7 +147,7 @@ def _context() -> Any:
     return mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
 
 
-def _worker_main(conn: Connection, scenario: str, controller: str) -> None:
+def _worker_main(conn: Connection, scenario: str, controller: str, robot: str) -> None:
     """A worker: seeds in, summaries out, until it gets None."""
     ignore_in_child()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
@@ -148,7 +159,7 @@ def _worker_main(conn: Connection, scenario: str, controller: str) -> None:
         if seed is None:
             return
         try:
-            result = run_trial(scenario, controller, seed)
+            result = run_trial(scenario, controller, seed, robot)
         except Exception as exc:  # reported as a failed trial, never as a traceback
             result = lost_trial(seed, WORKER_ERROR, f"{type(exc).__name__}: {exc}")
         conn.send(result)
@@ -170,7 +181,9 @@ class _Worker:
         self.conn, child = ctx.Pipe()
         with _stop_signals_blocked():
             self.process = ctx.Process(
-                target=_worker_main, args=(child, req.scenario, req.controller), daemon=True
+                target=_worker_main,
+                args=(child, req.scenario, req.controller, req.robot),
+                daemon=True,
             )
             self.process.start()
         child.close()
@@ -251,6 +264,7 @@ def sweep_report(
     errors = np.array([r["place_error_m"] for r in ok if r["place_error_m"] is not None])
     return {
         "scenario": req.scenario,
+        "robot": next((r["robot"] for r in full), req.robot),
         "controller": req.controller,
         "trials": req.trials,
         "completed": len(results),

@@ -21,6 +21,8 @@ from pickplace.scene import Scene
 
 # Codes of TickLog.nonfinite: what first became non-finite at a tick.
 FINITE, CONTROLLER_NONFINITE, STATE_NONFINITE = 0, 1, 2
+# Length of a pose as mink's parameter vector wxyz_xyz.
+POSE_SIZE = 7
 
 
 class TickLog:
@@ -34,20 +36,26 @@ class TickLog:
 
     def __init__(self, scene: Scene, capacity: int, dt: float) -> None:
         n, model = capacity, scene.model
+        nq = scene.n_joints  # arm joints
+        n_grip = len(scene.gripper_actuator_ids)
         self.scene = scene
         self.dt = dt
         # ---- raw, written by the loop every tick
-        self.q_cmd = np.zeros((n, 7))
-        self.qdot_cmd = np.zeros((n, 7))
-        self.x_WG_plan = np.zeros((n, 7))  # wxyz_xyz, at the tick's start
+        self.q_cmd = np.zeros((n, nq))
+        self.qdot_cmd = np.zeros((n, nq))
+        self.x_WG_plan = np.zeros((n, POSE_SIZE))  # wxyz_xyz, at the tick's start
         self.V_WG_plan = np.zeros((n, 6))  # planned [v; ω] in world at the tick's start
         self.plan_segment = np.zeros(n, dtype=np.int16)  # index of the segment's first keyframe
-        self.x_WG_cmd = np.zeros((n, 7))  # wxyz_xyz: FK of the q the IK used
-        self.J_WG = np.zeros((n, 6, 7))  # tool Jacobian [v; ω] at that q
-        self.gripper_cmd = np.zeros(n)
+        self.x_WG_cmd = np.zeros((n, POSE_SIZE))  # wxyz_xyz: FK of the q the IK used
+        self.J_WG = np.zeros((n, 6, nq))  # tool Jacobian [v; ω] at that q
+        self.gripper_cmd = np.zeros(n)  # commanded pad gap [m]
         self.ik_us = np.zeros(n)
         self.ik_status = np.zeros(n, dtype=np.int8)
-        self.arm_ctrl = np.zeros((n, 7))  # position actuator targets q_cmd + (kv/kp) q̇_cmd
+        # The robot's actuator commands, arm then gripper (one row is sent to MuJoCo per tick):
+        # position targets q_cmd + (kv/kp) q̇_cmd, and the gripper command for gripper_cmd.
+        self.ctrl = np.zeros((n, nq + n_grip))
+        self.arm_ctrl = self.ctrl[:, :nq]
+        self.gripper_ctrl = self.ctrl[:, nq:]
         self.qpos = np.zeros((n, model.nq))
         self.p_WG = np.zeros((n, 3))
         self.R_WG = np.zeros((n, 3, 3))
@@ -64,11 +72,11 @@ class TickLog:
         self.p_WG_cmd = self.x_WG_cmd[:, 4:]
         # ---- derived, filled per block by derive()
         self.t = np.zeros(n)  # time at the end of the tick [s]
-        self.q = np.zeros((n, 7))
+        self.q = np.zeros((n, nq))
         self.quat_WG = np.zeros((n, 4))  # wxyz
         self.gripper_gap = np.zeros(n)
         self.pad_force = np.zeros((n, 2))
-        self.sigma = np.zeros((n, 6))
+        self.sigma = np.zeros((n, min(6, nq)))
         self.sigma_t = np.zeros((n, 3))
         self.U_t = np.zeros((n, 3, 3))  # axes of the translational velocity ellipsoid
         self.quat_t = np.zeros((n, 4))  # the same rotation (det U_t = +1) as a wxyz quaternion
@@ -84,10 +92,13 @@ class TickLog:
         self.speed_ratio = np.zeros(n)  # max over joints of |q̇_cmd| / q̇_max
         self.limit_violation = np.zeros(n)  # largest distance of q or q_cmd past a limit [rad]
         # ---- filled by the grasp checks
-        self.holding_torque = np.zeros((n, 7))
+        self.holding_torque = np.zeros((n, nq))
         self.slip = np.full(n, np.nan)
         self._inv_v_max = 1.0 / scene.v_max  # for derive()
         self._world_sensor_cols = scene.robot_world_sensor_adr[:, None] + np.arange(4)
+        sides = scene.pad_sensor_side
+        self._pad_sides = np.zeros((len(sides), 2))  # per pad sensor: 1 in its side's column
+        self._pad_sides[np.arange(len(sides)), sides] = 1.0
 
     def derive(self, k0: int, k1: int) -> tuple[int, int] | None:
         """Fill the derived rows ``[k0, k1)`` from the raw ones (idempotent).
@@ -103,10 +114,10 @@ class TickLog:
         qpos = self.qpos[sl]
         self.t[sl] = np.arange(k0, k1) * self.dt + self.dt
         self.q[sl] = qpos[:, sc.arm_qpos_adr]
-        self.gripper_gap[sl] = sc.finger_gap(qpos)
-        pads = sc.pad_sensor_rows(self.sensordata[sl])
-        self.pad_force[sl] = pads[..., 1].sum(axis=-1)
-        found = pads[:, :, 0, 0].max(axis=1)  # contacts counted, slot 0 of each pad
+        self.gripper_gap[sl] = sc.gripper_gaps(self.body_pos[sl], self.body_quat[sl], self.R_WG[sl])
+        pads = sc.pad_sensor_rows(self.sensordata[sl])  # (ticks, sensors, slots, 4)
+        self.pad_force[sl] = pads[..., 1].sum(axis=-1) @ self._pad_sides
+        found = pads[:, :, 0, 0].max(axis=1)  # contacts counted, slot 0 of each pad sensor
         for k in range(k0, k1):
             mujoco.mju_mat2Quat(self.quat_WG[k], self.R_WG_flat[k])
 

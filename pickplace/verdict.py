@@ -85,7 +85,7 @@ def placement_problems(
         problems.append("still moving")
     if brick_touches_robot(scene, data):
         problems.append("still touching the gripper")
-    gap = float(scene.finger_gap(data.qpos))
+    gap = scene.gripper_gap(data)
     if gap < grasp_width:
         problems.append(f"gripper not open (gap {gap * 1000:.0f} mm)")
     return problems
@@ -152,12 +152,14 @@ class RunResult:
     plan: dict[str, Any] | None = None
     planning_time_s: float | None = None
     recording: str | None = None
+    robot: str | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable summary (the keys are an interface: see the README)."""
         rtf = self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else float("inf")
         out: dict[str, Any] = {
             "scenario": self.scenario,
+            "robot": self.robot,
             "controller": self.controller,
             "seed": self.seed,
             "goal": self.goal,

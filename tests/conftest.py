@@ -1,4 +1,5 @@
-"""Shared fixtures: the default scene, and helpers to run scenarios and the CLI."""
+"""Shared fixtures: the default scene (the iiwa14-wsg50 in scenes/world.xml), and helpers to
+run scenarios and the CLI."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from typing import Any
 
 import pytest
 
-from pickplace.scene import SCENES_DIR, Scene, load_scene
+from pickplace.loader import load_scene
+from pickplace.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -20,12 +22,6 @@ REPO = Path(__file__).resolve().parent.parent
 def scene() -> Scene:
     """The default scene (do not mutate its model: faults need a fresh one)."""
     return load_scene()
-
-
-def scene_files() -> list[Path]:
-    """Every complete scene in scenes/ (world.xml is the world without a robot: robots are
-    composed into it by pickplace.robot, and tests/test_robot.py checks the result)."""
-    return sorted(p for p in SCENES_DIR.glob("*.xml") if p.name != "world.xml")
 
 
 def run_cli(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:

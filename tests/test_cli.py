@@ -9,6 +9,7 @@ import pytest
 
 from pickplace.scenarios import SCENARIOS
 from tests.conftest import REPO, run_cli, run_cli_json
+from tests.toy_robot import BAD_CASES, write_toy_robot
 
 BAD_INPUTS = [
     (["--scene", "/nonexistent/scene.xml"], "does not exist"),
@@ -48,32 +49,24 @@ def test_bad_input_is_one_line_exit_2_without_traceback(args: list[str], expecte
     assert proc.stdout == ""
 
 
-def test_scene_missing_a_required_name_lists_the_names_that_exist(tmp_path: Path) -> None:
-    scenes = REPO / "scenes"
-    (tmp_path / "wsg50.xml").write_text(
-        (scenes / "wsg50.xml").read_text().replace('name="tool"', 'name="tcp"')
-    )
-    (tmp_path / "iiwa14.xml").write_text((scenes / "iiwa14.xml").read_text())
-    (tmp_path / "scene.xml").write_text((scenes / "scene.xml").read_text())
-    proc = run_cli("run", "--scene", str(tmp_path / "scene.xml"))
+def test_world_missing_a_required_name_lists_the_names_that_exist(tmp_path: Path) -> None:
+    world = (REPO / "scenes" / "world.xml").read_text()
+    (tmp_path / "world.xml").write_text(world.replace('name="bin2_floor"', 'name="bin2_base"'))
+    proc = run_cli("run", "--scene", str(tmp_path / "world.xml"))
     assert proc.returncode == 2
-    assert proc.stderr.strip() == (
-        "pickplace: error: unknown site 'wsg50/tool'; valid: attachment_site, bin1_center, "
-        "bin2_center, brick, wsg50/tcp"
-    )
+    line = proc.stderr.strip()
+    assert len(line.splitlines()) == 1 and "Traceback" not in proc.stderr
+    assert line.startswith("pickplace: error: unknown geom 'bin2_floor'; valid: ")
+    assert "bin2_base" in line and "bin1_floor" in line
 
 
 def test_unreachable_brick_is_refused(tmp_path: Path) -> None:
-    """A scene whose bin 1 lies 2 m away: the brick is inside the bin but out of reach."""
-    scenes = REPO / "scenes"
-    for name in ("wsg50.xml", "iiwa14.xml"):
-        (tmp_path / name).write_text((scenes / name).read_text())
-    (tmp_path / "scene.xml").write_text(
-        (scenes / "scene.xml")
-        .read_text()
-        .replace('<body name="bin1" pos="0 -0.55 0">', '<body name="bin1" pos="0 -2 0">')
+    """A world whose bin 1 lies 2 m away: the brick is inside the bin but out of reach."""
+    world = (REPO / "scenes" / "world.xml").read_text()
+    (tmp_path / "world.xml").write_text(
+        world.replace('<body name="bin1" pos="0 -0.55 0">', '<body name="bin1" pos="0 -2 0">')
     )
-    proc = run_cli("run", "--scene", str(tmp_path / "scene.xml"), "--brick=0,-2,0")
+    proc = run_cli("run", "--scene", str(tmp_path / "world.xml"), "--brick=0,-2,0")
     assert proc.returncode == 2
     assert "unreachable" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
 
@@ -141,8 +134,84 @@ def test_json_output_has_every_documented_key() -> None:
 def test_human_summary_and_scenarios_listing() -> None:
     proc = run_cli("run")
     assert proc.returncode == 0
-    assert "pick-place / qp / seed 0: SUCCESS" in proc.stdout
+    assert "pick-place / iiwa14-wsg50 / qp / seed 0: SUCCESS" in proc.stdout
     listing = run_cli("scenarios")
     names = [line.split()[0] for line in listing.stdout.splitlines()]
     assert {"pick-place", "pick-place-random", "singular-reach"} <= set(names)
     assert json.loads(run_cli("scenarios", "--json").stdout)["pick-place"]["expected"] == "success"
+
+
+# The brief's bad robot files, through the real CLI (tests/toy_robot.py writes each one).
+CLI_BAD_ROBOTS = [
+    "missing arm file",
+    "mesh does not load",
+    "speed limits of the wrong length",
+    "speed limits not positive",
+    "no chain from the root to the flange",
+    "no pads found",
+    "gripper that cannot open wider than the brick",
+]
+
+
+@pytest.mark.parametrize("case", CLI_BAD_ROBOTS)
+def test_a_bad_robot_file_is_one_line_naming_file_and_field_exit_2(
+    case: str, tmp_path: Path
+) -> None:
+    changes, field, fragments = BAD_CASES[case]
+    path = write_toy_robot(tmp_path, **changes)
+    proc = run_cli("run", "--robot", str(path))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    line = lines[0]
+    assert line.startswith(f"pickplace: error: --robot: {path.resolve()}: "), line
+    assert field in line and "valid" in line, line
+    for fragment in fragments:
+        assert fragment in line, line
+    assert proc.stdout == ""
+
+
+@pytest.mark.parametrize("command", ["run", "plan", "sweep"])
+def test_an_unknown_robot_lists_the_bundled_ones(command: str, tmp_path: Path) -> None:
+    proc = run_cli(command, "--robot", "no-such-robot")
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        "pickplace: error: --robot: unknown robot 'no-such-robot'; valid: iiwa14-wsg50, "
+        "panda-hand, ur5e-2f85 or a robot.toml path"
+    )
+    missing = tmp_path / "robot.toml"
+    proc = run_cli(command, "--robot", str(missing))
+    assert proc.returncode == 2
+    assert f"{missing}: robot description does not exist" in proc.stderr
+
+
+def test_robots_are_listed_with_joints_gripper_width_force_and_file() -> None:
+    proc = run_cli("robots", "--json")
+    assert proc.returncode == 0, proc.stderr
+    rows = {r["name"]: r for r in json.loads(proc.stdout)["robots"]}
+    assert set(rows) == {"iiwa14-wsg50", "panda-hand", "ur5e-2f85"}
+    assert {n: r["joints"] for n, r in rows.items()} == {
+        "iiwa14-wsg50": 7,
+        "panda-hand": 7,
+        "ur5e-2f85": 6,
+    }
+    assert "coupled by the loader" in rows["panda-hand"]["gripper"]
+    assert rows["ur5e-2f85"]["gripper"].startswith("linkage")
+    for name, r in rows.items():
+        assert r["description"] == f"robots/{name}/robot.toml"
+        assert (REPO / r["description"]).is_file()
+        assert r["open_width_m"] > 0.05  # wider than the brick
+        assert r["squeeze_force_n"] > 10.0
+    text = run_cli("robots")
+    assert text.returncode == 0 and len(text.stdout.strip().splitlines()) == 3
+
+
+def test_run_plan_and_sweep_take_a_robot() -> None:
+    code, s = run_cli_json("--robot", "ur5e-2f85")
+    assert code == 0 and s["robot"] == "ur5e-2f85" and s["success"]
+    plan = run_cli("plan", "--robot", "panda-hand", "--json")
+    assert plan.returncode == 0 and json.loads(plan.stdout)["robot"] == "panda-hand"
+    sweep = run_cli("sweep", "--robot", "panda-hand", "--trials", "2", "--workers", "1", "--json")
+    assert sweep.returncode == 0, sweep.stderr
+    report = json.loads(sweep.stdout)
+    assert report["robot"] == "panda-hand" and report["successes"] == 2

@@ -168,7 +168,8 @@ def test_plan_json_and_run_json_carry_the_same_plan() -> None:
     assert names[0] == "initial" and names[-1] == "retreat"
     proc = run_cli("run", "--json")
     ran = json.loads(proc.stdout)
-    keys = set(planned) - {"scenario", "controller", "seed", "planning_time_s"}
+    keys = set(planned) - {"scenario", "robot", "controller", "seed", "planning_time_s"}
+    assert planned["robot"] == ran["robot"] == "iiwa14-wsg50"
     assert {k: ran["plan"][k] for k in keys} == {k: planned[k] for k in keys}
 
 

@@ -71,7 +71,7 @@ def test_clearance_is_mujocos_distance_between_the_named_geoms(scene: Scene) -> 
     d = mujoco.MjData(m)
     d.qpos[scene.arm_qpos_adr] = first.preflight.q[-1]
     width = first.plan.trajectory.sample(problem.t)[2]
-    d.qpos[scene.finger_qpos_adr] = scene.finger_qpos(width)
+    d.qpos[scene.gripper_qpos_adr] = scene.gripper_qpos_for_width(width)
     scene.set_brick_pose(d, X_pick)
     mujoco.mj_kinematics(m, d)
     g1, g2 = m.geom(robot_geom).id, m.geom(world_geom).id

@@ -17,9 +17,10 @@ from rerun.chunk import RrdReader
 from pickplace.checks import FailureReason
 from pickplace.controllers import make_controller
 from pickplace.errors import InvalidInputError, OutputError, RecordingError
+from pickplace.loader import load_scene
 from pickplace.recording import Recorder
 from pickplace.scenarios import BuildRequest, get_scenario
-from pickplace.scene import Scene, load_scene
+from pickplace.scene import Scene
 from pickplace.sim import RunResult, Simulation
 
 RECORDING_ID = "pick-place/qp/seed-0"
@@ -132,13 +133,15 @@ def test_world_is_z_up_and_has_the_scene_geometry(recording: Recording) -> None:
         f"{body_path('bin1')}/bin1_floor",
         f"{body_path('bin2')}/bin2_wall_px",
         f"{body_path('brick')}/brick",
-        f"{body_path('link7')}/link7_visual",
-        f"{body_path('wsg50/left_finger')}/{rr.escape_entity_path_part('wsg50/left_pad_visual')}",
+        f"{body_path('arm/link7')}/{rr.escape_entity_path_part('arm/link7_visual')}",
+        f"{body_path('gripper/left_finger')}/{rr.escape_entity_path_part('gripper/left_pad_visual')}",
     ):
         assert path in ents, path
         assert any(k.endswith(":translation") for k in ents[path].static), path
     # Collision geoms (group 3) are not drawn.
-    assert f"{body_path('link7')}/link7_collision" not in ents
+    assert (
+        f"{body_path('arm/link7')}/{rr.escape_entity_path_part('arm/link7_collision')}" not in ents
+    )
     brick_color = ents[f"{body_path('brick')}/brick"].static["Boxes3D:colors"]
     assert brick_color == [0xCC1A1AFF]  # rgba (0.8, 0.1, 0.1, 1)
 
@@ -174,7 +177,7 @@ def test_plan_is_recorded(recording: Recording) -> None:
 # ---------------------------------------------------------------------------- per tick
 
 
-@pytest.mark.parametrize("body", ["link7", "brick", "wsg50/left_finger"])
+@pytest.mark.parametrize("body", ["arm/link7", "brick", "gripper/left_finger"])
 def test_moving_bodies_have_one_transform_per_tick(recording: Recording, body: str) -> None:
     ent = recording.entities[body_path(body)]
     ticks = recording.result.ticks
@@ -294,7 +297,7 @@ def test_interrupted_run_is_complete_and_readable(tmp_path: Path) -> None:
     assert result.failure is FailureReason.INTERRUPTED
     assert result.ticks == 150
     ents = read_entities(path)  # the footer is there: store() works
-    assert ents[body_path("link7")].n_rows("Transform3D:translation") == 150
+    assert ents[body_path("arm/link7")].n_rows("Transform3D:translation") == 150
     assert ents["plots/kinematics/singular_values"].n_rows("Scalars:scalars") == 150
     assert ents["events"].rows["TextLog:text"][-1] == ["interrupted by the user"]
     assert "TextDocument:text" in ents["summary"].static
@@ -305,8 +308,10 @@ def test_interrupt_before_the_first_tick(tmp_path: Path) -> None:
     result, _ = run_recorded(path, stop_at=0)
     assert result.ticks == 0
     ents = read_entities(path)
-    assert f"{body_path('link7')}/link7_visual" in ents  # the static geometry is there
-    assert body_path("link7") not in ents  # no tick, no pose
+    assert (
+        f"{body_path('arm/link7')}/{rr.escape_entity_path_part('arm/link7_visual')}" in ents
+    )  # the static geometry is there
+    assert body_path("arm/link7") not in ents  # no tick, no pose
     assert "TextDocument:text" in ents["summary"].static
 
 

@@ -1,8 +1,9 @@
 """Robot descriptions: composed with MjSpec, calibrated in simulation, bad files refused.
 
-The bundled iiwa14-wsg50 must compose into a model equivalent to today's hand-written scene;
-a small arm and gripper written here (published-file pitfalls included) must compose and
-calibrate with no bundled-robot assumption; every bad file is one line naming file and field.
+The bundled iiwa14-wsg50 must compose into the arm and gripper its files and data sheet state;
+a small arm and gripper of our own (tests/toy_robot.py, published-file pitfalls included) must
+compose and calibrate with no bundled-robot assumption; every bad file is one line naming file
+and field.
 """
 
 from __future__ import annotations
@@ -32,9 +33,16 @@ from pickplace.robot_physics import (
     ROBOT_CONTYPE,
     arm_min_armature,
 )
-from pickplace.scene import Scene
+from tests.toy_robot import (
+    BAD_CASES,
+    TOY_GRIPPER,
+    TOY_MOTOR_LIMITS,
+    TOY_SPEED_LIMITS,
+    TOY_TOML,
+    write_toy_robot,
+)
 
-TODAYS_OPEN_WIDTH = 0.10  # the plan's open gap, held by today's home keyframe [m]
+TODAYS_OPEN_WIDTH = 0.10  # the plans' open gap for the iiwa (PlanConfig.open_width) [m]
 
 
 @pytest.fixture(scope="module")
@@ -63,63 +71,60 @@ def _box_support(model: mujoco.MjModel, data: mujoco.MjData, g: int, u_W: np.nda
 # --------------------------------------------------------------------------- iiwa14-wsg50
 
 
-def test_iiwa_joints_limits_and_actuators_equal_todays_scene(iiwa: Composition, scene: Scene):
-    robot, m, old = iiwa.robot, iiwa.model, scene.model
-    assert robot.arm_joint_names == tuple(ARM_PREFIX + j for j in scene.arm_joint_names)
-    np.testing.assert_array_equal(robot.q_min, scene.q_min)
-    np.testing.assert_array_equal(robot.q_max, scene.q_max)
-    np.testing.assert_allclose(robot.v_max, scene.v_max, rtol=1e-7)
+# The iiwa 14's data (robots/iiwa14-wsg50/arm.xml): ranges, torque limits, speed limits [deg/s].
+IIWA_RANGES_DEG = [170, 120, 170, 120, 170, 120, 175]
+IIWA_TORQUES = [320, 320, 176, 176, 110, 40, 40]
+IIWA_SPEEDS_DEG = [85, 85, 100, 75, 130, 135, 135]
+
+
+def test_iiwa_joints_limits_and_actuators_follow_its_data_sheet(iiwa: Composition) -> None:
+    robot, m = iiwa.robot, iiwa.model
+    assert robot.arm_joint_names == tuple(f"{ARM_PREFIX}joint{i}" for i in range(1, 8))
+    np.testing.assert_allclose(np.rad2deg(robot.q_max), IIWA_RANGES_DEG, atol=1e-3)
+    np.testing.assert_array_equal(robot.q_min, -robot.q_max)
+    np.testing.assert_allclose(np.rad2deg(robot.v_max), IIWA_SPEEDS_DEG, atol=1e-5)
     assert not robot.continuous.any()
-    np.testing.assert_array_equal(robot.q_home, scene.q_home)
-    for field in ("actuator_gainprm", "actuator_biasprm", "actuator_forcerange"):
-        np.testing.assert_array_equal(
-            getattr(m, field)[robot.arm_actuator_ids], getattr(old, field)[scene.arm_actuator_ids]
-        )
-    np.testing.assert_array_equal(
-        m.dof_armature[robot.arm_dof_adr], old.dof_armature[scene.arm_dof_adr]
-    )
-    np.testing.assert_allclose(robot.p_W_base, scene.p_W_base, atol=1e-12)
+    np.testing.assert_array_equal(robot.q_home, robot.description.arm.home)
+    acts = robot.arm_actuator_ids
+    np.testing.assert_array_equal(m.actuator_gainprm[acts, 0], 2000.0)
+    np.testing.assert_array_equal(m.actuator_biasprm[acts, 1], -2000.0)
+    np.testing.assert_allclose(m.actuator_forcerange[acts, 1], IIWA_TORQUES)
+    np.testing.assert_array_equal(m.dof_armature[robot.arm_dof_adr], 0.1)
+    # Critical damping: kv = 2 sqrt(kp (armature + the link inertia the joint sees)) > 2 sqrt(kp a).
+    assert np.all(-m.actuator_biasprm[acts, 2] > 2.0 * np.sqrt(2000.0 * 0.1))
+    np.testing.assert_allclose(robot.p_W_base, [0.0, 0.0, 0.1575], atol=1e-12)
     assert robot.a_max is not None and robot.a_max.shape == (robot.n_joints,)
 
 
-def test_iiwa_tool_site_at_home_matches_todays_within_a_millimetre(iiwa: Composition, scene):
-    data, old = iiwa.robot.make_data(iiwa.model), scene.make_data()
-    site, old_site = iiwa.robot.tool_site_id, scene.tool_site_id
-    assert np.linalg.norm(data.site_xpos[site] - old.site_xpos[old_site]) < 1e-3
-    R, R_old = data.site_xmat[site].reshape(3, 3), old.site_xmat[old_site].reshape(3, 3)
-    angle = np.arccos(np.clip((np.trace(R_old.T @ R) - 1.0) / 2.0, -1.0, 1.0))
-    assert angle < 1e-6
-
-
-def test_iiwa_gripper_force_width_and_home_equal_todays(iiwa: Composition, scene: Scene):
+def test_iiwa_gripper_force_width_and_home(iiwa: Composition) -> None:
     robot, m = iiwa.robot, iiwa.model
-    assert robot.squeeze_force == pytest.approx(scene.gripper_force_limit, rel=1e-3)
-    assert robot.open_width == pytest.approx(scene.gripper_max_gap, abs=1e-6)
+    assert robot.squeeze_force == pytest.approx(40.0, rel=1e-3)
+    assert robot.open_width == pytest.approx(0.11, abs=1e-6)  # ctrlrange of the finger tendon
     grip = robot.gripper_actuator_ids
     np.testing.assert_allclose(m.actuator_forcerange[grip], [[-40.0, 40.0]])
     key = robot.home_key_id
     np.testing.assert_allclose(m.key_ctrl[key, grip], [TODAYS_OPEN_WIDTH], atol=1e-6)
     data = robot.make_data(m)
-    # Today's gap is the sum of the finger joints; the pad-face gap equals it.
+    # The WSG-like gap is the sum of the finger joints; the pad-face gap equals it.
     finger_sum = data.qpos[m.jnt_qposadr[robot.gripper_joint_ids]].sum()
     assert robot.gap(data) == pytest.approx(finger_sum, abs=1e-9)
     assert robot.gap(data) == pytest.approx(TODAYS_OPEN_WIDTH, abs=1e-6)
 
 
-def test_iiwa_contact_bits_pads_and_sensors_equal_todays(iiwa: Composition, scene: Scene):
-    robot, m, old = iiwa.robot, iiwa.model, scene.model
-    for new_pad, old_pad in zip(robot.pad_geom_ids, scene.pad_geom_ids, strict=True):
-        (g,) = new_pad
-        for field in ("geom_priority", "geom_solref", "geom_solimp", "geom_friction", "geom_size"):
-            np.testing.assert_array_equal(getattr(m, field)[g], getattr(old, field)[old_pad])
+def test_iiwa_contact_bits_pads_and_sensors(iiwa: Composition) -> None:
+    robot, m = iiwa.robot, iiwa.model
+    brick = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, BRICK_GEOM)
+    for pads in robot.pad_geom_ids:
+        (g,) = pads
+        assert m.geom_priority[g] == 1
+        np.testing.assert_allclose(m.geom_solref[g], [2.0 * m.opt.timestep, 1.0])
     assert set(m.geom_contype[robot.robot_geom_ids]) == {ROBOT_CONTYPE}
     assert set(m.geom_conaffinity[robot.robot_geom_ids]) == {ROBOT_CONAFFINITY}
-    assert robot.pad_force_slots == scene.pad_force_slots
+    assert robot.pad_force_slots == 8
     for sensors, pads in zip(robot.pad_force_sensor_ids, robot.pad_geom_ids, strict=True):
         for s, pad in zip(sensors, pads, strict=True):
             assert m.sensor_type[s] == mujoco.mjtSensor.mjSENS_CONTACT
-            np.testing.assert_array_equal(m.sensor_intprm[s], old.sensor_intprm[0])
-            brick = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, BRICK_GEOM)
+            assert int(m.sensor_intprm[s, 2]) == robot.pad_force_slots
             assert {int(m.sensor_objid[s]), int(m.sensor_refid[s])} == {int(pad), brick}
 
 
@@ -234,143 +239,6 @@ def test_arm_model_keeps_only_the_arm_joints(iiwa: Composition) -> None:
 
 
 # --------------------------------------------------------------------------- a robot of our own
-
-# A 6-DoF arm as published elsewhere: degrees without <compiler angle>, torque motors, an
-# <option>, a keyframe, a floor on its worldbody, an attribute MuJoCo rejects (group on a
-# default), a continuous joint, and a body (not a site) as flange.
-TOY_ARM = """
-<mujoco model="toy arm">
-  <option timestep="0.001"/>
-  <default>
-    <default class="link" group="1">
-      <joint damping="1" armature="0.05"/>
-      <geom type="capsule" size="0.04" density="300"/>
-    </default>
-  </default>
-  <worldbody>
-    <geom name="floor" type="plane" size="1 1 0.1"/>
-    <body name="pedestal" childclass="link">
-      <geom type="cylinder" size="0.08 0.15" pos="0 0 0.15"/>
-      <body name="l1" pos="0 0 0.3">
-        <joint name="yaw" axis="0 0 1" range="-170 170"/>
-        <geom fromto="0 0 0 0 0 0.05"/>
-        <body name="l2" pos="0 0 0.05">
-          <joint name="shoulder" axis="0 1 0" range="-110 110"/>
-          <geom fromto="0 0 0 0 0 0.45"/>
-          <body name="l3" pos="0 0 0.45">
-            <joint name="elbow" axis="0 1 0" range="-150 150"/>
-            <geom fromto="0 0 0 0 0 0.4"/>
-            <body name="l4" pos="0 0 0.4">
-              <joint name="wrist1" axis="0 0 1"/>
-              <geom size="0.035" fromto="0 0 0 0 0 0.05"/>
-              <body name="l5" pos="0 0 0.05">
-                <joint name="wrist2" axis="0 1 0" range="-120 120"/>
-                <geom size="0.035" fromto="0 0 0 0 0 0.05"/>
-                <body name="hand_mount" pos="0 0 0.06">
-                  <joint name="wrist3" axis="0 0 1" range="-350 350"/>
-                  <geom type="cylinder" size="0.035 0.01"/>
-                </body>
-              </body>
-            </body>
-          </body>
-        </body>
-      </body>
-    </body>
-  </worldbody>
-  <actuator>
-    <motor joint="yaw" ctrlrange="-150 150"/>
-    <motor joint="shoulder" ctrlrange="-75 75" gear="2"/>
-    <motor joint="elbow" ctrlrange="-80 80"/>
-    <motor joint="wrist1" ctrlrange="-20 20"/>
-    <motor joint="wrist2" ctrlrange="-20 20"/>
-    <motor joint="wrist3" ctrlrange="-20 20"/>
-  </actuator>
-  <keyframe><key name="rest" qpos="0 0 0 0 0 0"/></keyframe>
-</mujoco>
-"""
-
-# Two independently position-controlled slide fingers with two pads each (side by side, set
-# back from a finger link that reaches further), a mesh in a meshdir defined twice, radians.
-TOY_GRIPPER = """
-<mujoco model="toy gripper">
-  <compiler angle="radian" meshdir="meshes"/>
-  <asset>
-    <mesh name="palm" file="palm.obj"/>
-    <mesh name="palm" file="palm.obj"/>
-  </asset>
-  <default>
-    <default class="finger">
-      <joint type="slide" range="0 0.045" damping="5"/>
-      <geom type="box" friction="1 0.005 0.0001"/>
-    </default>
-  </default>
-  <worldbody>
-    <body name="hand">
-      <geom type="mesh" mesh="palm" contype="0" conaffinity="0" group="2"/>
-      <geom name="palm" type="box" size="0.03 0.05 0.025" pos="0 0 0.025" mass="0.5"/>
-      <body name="finger_a" pos="0 0 0.05">
-        <joint name="finger_a" class="finger" axis="0 1 0"/>
-        <geom class="finger" name="a_link" size="0.01 0.006 0.03" pos="0 0.012 0.03" mass="0.05"/>
-        <geom class="finger" name="a_pad1" size="0.005 0.002 0.01" pos="-0.007 0.004 0.045"/>
-        <geom class="finger" name="a_pad2" size="0.005 0.002 0.01" pos="0.007 0.004 0.045"/>
-      </body>
-      <body name="finger_b" pos="0 0 0.05">
-        <joint name="finger_b" class="finger" axis="0 -1 0"/>
-        <geom class="finger" name="b_link" size="0.01 0.006 0.03" pos="0 -0.012 0.03" mass="0.05"/>
-        <geom class="finger" name="b_pad1" size="0.005 0.002 0.01" pos="-0.007 -0.004 0.045"/>
-        <geom class="finger" name="b_pad2" size="0.005 0.002 0.01" pos="0.007 -0.004 0.045"/>
-      </body>
-    </body>
-  </worldbody>
-  <actuator>
-    <position name="a" joint="finger_a" kp="1000" ctrlrange="0 0.045" forcerange="-25 25"/>
-    <position name="b" joint="finger_b" kp="1000" ctrlrange="0 0.045" forcerange="-25 25"/>
-  </actuator>
-</mujoco>
-"""
-
-# A 6 x 10 x 5 cm box as a Wavefront OBJ (the palm's visual mesh).
-_CORNERS = ((-0.03, -0.05), (0.03, -0.05), (0.03, 0.05), (-0.03, 0.05))
-PALM_OBJ = "\n".join(
-    [f"v {x} {y} {z}" for z in (0, 0.05) for x, y in _CORNERS]
-    + [
-        "f 1 3 2", "f 1 4 3", "f 5 6 7", "f 5 7 8", "f 1 2 6", "f 1 6 5",
-        "f 2 3 7", "f 2 7 6", "f 3 4 8", "f 3 8 7", "f 4 1 5", "f 4 5 8",
-    ]
-)  # fmt: skip
-
-TOY_TOML = """
-name = "toy-6dof"
-[arm]
-mjcf = "arm.xml"
-flange = "hand_mount"
-speed_limits = [2.0, 2.0, 2.5, 3.0, 3.0, 3.0]
-angle = "degree"
-[gripper]
-mjcf = "gripper.xml"
-mount_pos = [0, 0, 0.01]
-"""
-
-TOY_SPEED_LIMITS = [2.0, 2.0, 2.5, 3.0, 3.0, 3.0]
-TOY_MOTOR_LIMITS = [150.0, 150.0, 80.0, 20.0, 20.0, 20.0]  # ctrlrange × gear [N·m]
-
-
-def write_toy_robot(
-    folder: Path,
-    arm: str = TOY_ARM,
-    gripper: str = TOY_GRIPPER,
-    toml: str = TOY_TOML,
-    mesh: str | None = PALM_OBJ,
-) -> Path:
-    """Write the toy arm, gripper, mesh and description into ``folder``; return the TOML."""
-    (folder / "meshes").mkdir(parents=True, exist_ok=True)
-    (folder / "arm.xml").write_text(arm)
-    (folder / "gripper.xml").write_text(gripper)
-    if mesh is not None:
-        (folder / "meshes" / "palm.obj").write_text(mesh)
-    path = folder / "robot.toml"
-    path.write_text(toml)
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -489,84 +357,6 @@ def _one_line_error(path: Path, field: str, *fragments: str) -> Callable[[], Non
     return check
 
 
-BAD_CASES = {
-    "missing arm file": (
-        {"toml": TOY_TOML.replace('"arm.xml"', '"no-such-arm.xml"')},
-        "[arm] mjcf",
-        ("no-such-arm.xml", "does not exist"),
-    ),
-    "missing gripper file": (
-        {"toml": TOY_TOML.replace('"gripper.xml"', '"nope.xml"')},
-        "[gripper] mjcf",
-        ("nope.xml",),
-    ),
-    "mesh file missing": ({"mesh": None}, "[gripper] mjcf", ("mesh 'palm'", "does not exist")),
-    "mesh does not load": ({"mesh": "v 0 0 0\nf 1 1 1\n"}, "[gripper] mjcf", ("mesh 'palm'",)),
-    "speed limits of the wrong length": (
-        {"toml": TOY_TOML.replace("3.0, 3.0, 3.0]", "3.0, 3.0]")},
-        "[arm] speed_limits",
-        ("has 5 values", "6 positive numbers", "yaw", "wrist3"),
-    ),
-    "speed limits not positive": (
-        {"toml": TOY_TOML.replace("[2.0, 2.0", "[2.0, -2.0")},
-        "[arm] speed_limits",
-        ("> 0",),
-    ),
-    "no chain from the root to the flange": (
-        {"toml": TOY_TOML.replace('flange = "hand_mount"', 'flange = "pedestal"')},
-        "[arm] flange",
-        ("no hinge or slide joint", "pedestal"),
-    ),
-    "flange that does not exist": (
-        {"toml": TOY_TOML.replace('flange = "hand_mount"', 'flange = "tool0"')},
-        "[arm] flange",
-        ("tool0", "hand_mount"),
-    ),
-    "no pads found": (
-        {
-            "gripper": TOY_GRIPPER.replace(
-                '<geom type="box" friction', '<geom type="box" contype="0" conaffinity="0" friction'
-            )
-        },
-        "[gripper] pads",
-        ("no pads found",),
-    ),
-    "gripper that cannot open wider than the brick": (
-        {
-            "gripper": TOY_GRIPPER.replace('range="0 0.045"', 'range="0 0.02"').replace(
-                'ctrlrange="0 0.045"', 'ctrlrange="0 0.02"'
-            )
-        },
-        "[gripper] mjcf",
-        ("cannot open wider than the brick", "50.0 mm"),
-    ),
-    "angle units unknown": (
-        {"toml": TOY_TOML.replace('angle = "degree"\n', "")},
-        "[arm] mjcf",
-        ("<compiler angle>", "radian"),
-    ),
-    "angle contradicting the file": (
-        {"toml": TOY_TOML.replace("mount_pos", 'angle = "degree"\nmount_pos')},
-        "[gripper] angle",
-        ("radian",),
-    ),
-    "unknown field": (
-        {"toml": TOY_TOML.replace("[gripper]", "[gripper]\ngrip = 3")},
-        "[gripper] grip",
-        ("unknown field", "grip_force"),
-    ),
-    "home outside a joint range": (
-        {
-            "toml": TOY_TOML.replace(
-                'angle = "degree"', 'angle = "degree"\nhome = [4, 0, 0, 0, 0, 0]'
-            )
-        },
-        "[arm] home",
-        ("yaw",),
-    ),
-}
-
-
 @pytest.mark.parametrize("case", BAD_CASES, ids=list(BAD_CASES))
 def test_bad_robot_files_raise_one_line_naming_file_and_field(case: str, tmp_path: Path):
     changes, field, fragments = BAD_CASES[case]
@@ -584,3 +374,18 @@ def test_missing_and_malformed_descriptions(tmp_path: Path) -> None:
     with pytest.raises(RobotError, match=r"unknown robot 'no-such-robot'.*iiwa14-wsg50"):
         load_robot("no-such-robot")
     assert issubclass(RobotError, PickPlaceError)
+
+
+def test_the_readme_example_description_is_valid_and_sets_every_field(tmp_path: Path) -> None:
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    section = readme.split("## Your own robot", 1)[1]
+    example = section.split("```toml\n", 1)[1].split("```", 1)[0]
+    write_toy_robot(tmp_path, toml=example)
+    desc = RobotDescription.from_toml(tmp_path / "robot.toml")
+    assert desc.name == "my-arm"
+    assert (
+        len(desc.arm.speed_limits) == len(desc.arm.accel_limits or ()) == len(desc.arm.home or ())
+    )
+    g = desc.gripper
+    assert g.pads == (("left_pad",), ("right_pad",)) and g.tcp is not None and g.tcp.site
+    assert g.open_command and g.closed_command and g.grip_force == 40.0 and g.couple_fingers

@@ -1,7 +1,7 @@
 """The bundled robot descriptions in robots/: files, kinematics, limits, gripper physics.
 
 Composition here uses MuJoCo's MjSpec directly (a frame on the flange, the gripper attached under
-a prefix, the arm attached to the world of scenes/scene.xml), so these facts hold for the files
+a prefix, the arm attached to the world of scenes/world.xml), so these facts hold for the files
 themselves, whatever loader reads them.
 """
 
@@ -27,7 +27,7 @@ else:  # pragma: no cover - Python 3.10
 
 REPO = Path(__file__).resolve().parent.parent
 ROBOTS_DIR = REPO / "robots"
-SCENE = REPO / "scenes" / "scene.xml"
+WORLD = REPO / "scenes" / "world.xml"
 ROBOTS = ("panda-hand", "ur5e-2f85")
 
 # The issue's description format: every key a bundled file may use.
@@ -154,19 +154,8 @@ def robot_spec(robot: str) -> mujoco.MjSpec:
 
 
 def world_spec() -> mujoco.MjSpec:
-    """scenes/scene.xml without its robot: bins, brick, floor, lights, cameras, options."""
-    spec = mujoco.MjSpec.from_file(str(SCENE))
-    spec.delete(spec.body("base"))
-    for element in [
-        *spec.actuators,
-        *spec.sensors,
-        *spec.keys,
-        *spec.numerics,
-        *spec.tendons,
-        *spec.equalities,
-    ]:
-        spec.delete(element)
-    return spec
+    """scenes/world.xml: bins, brick, floor, lights, cameras, options, no robot."""
+    return mujoco.MjSpec.from_file(str(WORLD))
 
 
 def composed(robot: str) -> mujoco.MjModel:

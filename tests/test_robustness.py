@@ -124,20 +124,28 @@ def free_port() -> int:
 SLOW = "0.25"
 
 
-def scene_copy(folder: Path, **timesteps: str) -> Path:
-    """The default scene files in ``folder``, with a ``<option timestep>`` per file given: the
-    scene's replaced, the robot files' (which have none: options live in the scene) added."""
-    for name in ("scene.xml", "iiwa14.xml", "wsg50.xml"):
-        text = (REPO / "scenes" / name).read_text()
-        ts = timesteps.get(name.removesuffix(".xml"))
-        if ts is not None and '<option timestep="0.002"' in text:
-            text = text.replace('<option timestep="0.002"', f'<option timestep="{ts}"')
-        elif ts is not None:
-            head = '<compiler angle="radian" autolimits="true"/>'
+def scene_copy(folder: Path, timestep: str | None = None) -> Path:
+    """The default world file in ``folder``, its ``<option timestep>`` replaced if given."""
+    text = (REPO / "scenes" / "world.xml").read_text()
+    if timestep is not None:
+        assert '<option timestep="0.002"' in text
+        text = text.replace('<option timestep="0.002"', f'<option timestep="{timestep}"')
+    (folder / "world.xml").write_text(text)
+    return folder / "world.xml"
+
+
+def robot_copy(folder: Path, gripper_timestep: str) -> Path:
+    """The default robot's files in ``folder``, its gripper file given its own
+    ``<option timestep>`` (options belong in the world file)."""
+    src = REPO / "robots" / "iiwa14-wsg50"
+    for name in ("robot.toml", "arm.xml", "gripper.xml"):
+        text = (src / name).read_text()
+        head = '<compiler angle="radian" autolimits="true"/>'
+        if name == "gripper.xml":
             assert head in text
-            text = text.replace(head, f'{head}\n  <option timestep="{ts}"/>')
+            text = text.replace(head, f'{head}\n  <option timestep="{gripper_timestep}"/>')
         (folder / name).write_text(text)
-    return folder / "scene.xml"
+    return folder / "robot.toml"
 
 
 @pytest.fixture
@@ -450,7 +458,7 @@ def sweep_report(out: str) -> dict[str, Any]:
 @pytest.mark.parametrize("workers", [1, 2])
 def test_5_ctrl_c_stops_a_sweep_within_a_second_with_a_partial_report(workers: int) -> None:
     proc = cli("sweep", "--trials", "200", "--workers", str(workers), "--json")
-    time.sleep(4.0)  # a few trials done
+    time.sleep(6.0)  # a few trials done, even on a loaded machine
     assert proc.poll() is None
     t0 = time.monotonic()
     proc.send_signal(signal.SIGINT)
@@ -481,20 +489,22 @@ def _workers(pid: int) -> list[int]:
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
 def test_6_a_dead_worker_is_a_failed_trial_with_its_seed() -> None:
-    proc = cli("sweep", "--trials", "2", "--workers", "2", "--seed", "7", "--json")
+    # Six trials on two workers: a live worker holds a trial until the last ones are handed
+    # out (two trials alone can be over before a loaded machine gets to the kill).
+    proc = cli("sweep", "--trials", "6", "--workers", "2", "--seed", "7", "--json")
     deadline = time.monotonic() + 60
     while not (kids := _workers(proc.pid)):
         assert proc.poll() is None and time.monotonic() < deadline
         time.sleep(0.01)
-    os.kill(kids[0], signal.SIGKILL)  # every worker holds a trial from its start
+    os.kill(kids[0], signal.SIGKILL)  # a worker holds a trial from its start
     code, out, err = finish(proc, 60)
     assert code == 1
     clean_stderr(err)
     report = sweep_report(out)
     assert report["interrupted"] is False
-    assert report["completed"] == 2
+    assert report["completed"] == 6
     assert report["failures_by_reason"]["worker-died"] == 1
-    assert set(report["failed_seeds"]["worker-died"]) <= {7, 8}
+    assert set(report["failed_seeds"]["worker-died"]) <= set(range(7, 13))
 
 
 # ---------------------------------------------------------------------------- 7: streams
@@ -555,7 +565,7 @@ def test_7_ctrl_c_during_set_up_still_gives_the_summary(after: float) -> None:
 
 @pytest.mark.parametrize("timestep", ["0", "1e-300", "-0.002", "0.02"])
 def test_8_unusable_timesteps_are_bad_input(tmp_path: Path, timestep: str) -> None:
-    scene = scene_copy(tmp_path, scene=timestep, iiwa14=timestep, wsg50=timestep)
+    scene = scene_copy(tmp_path, timestep)
     code, _, err = finish(cli("run", "--scene", str(scene), cwd=tmp_path))
     assert code == 2
     (line,) = clean_stderr(err)
@@ -563,14 +573,17 @@ def test_8_unusable_timesteps_are_bad_input(tmp_path: Path, timestep: str) -> No
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
 
 
-def test_8_mismatched_timesteps_warn_as_events_not_on_stderr(tmp_path: Path) -> None:
-    scene = scene_copy(tmp_path, scene="0.001", iiwa14="0.001", wsg50="0.002")
-    code, out, err = finish(cli("run", "--scene", str(scene), "--json", cwd=tmp_path))
-    assert code in (0, 1)
-    assert err == ""
+def test_8_a_robot_file_cannot_change_the_world_timestep(tmp_path: Path) -> None:
+    robot = robot_copy(tmp_path, gripper_timestep="0.001")
+    code, out, err = finish(cli("plan", "--robot", str(robot), "--json", cwd=tmp_path))
+    assert code == 0, err
+    assert err == "" and one_json(out)["feasible"]
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
-    warned = [e["text"] for e in one_json(out)["events"] if e["kind"] == "mujoco-warning"]
-    assert warned and "timestep: parent has 0.001, child has 0.002" in warned[0]
+    from pickplace.loader import load_scene
+
+    scene = load_scene(robot=str(robot))
+    assert scene.model.opt.timestep == 0.002  # the world's
+    assert any("option" in r for r in scene.robot.repairs), scene.robot.repairs
 
 
 @pytest.mark.parametrize("timestep", [0.002, 0.001, 0.003, 0.0025, 1e-4])

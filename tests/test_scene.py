@@ -1,4 +1,6 @@
-"""Scene files: they compile, step quietly, and model the lecture's arm, gripper and bins."""
+"""Scenes: the world with a robot composed into it compiles, steps quietly, and holds what the
+pipeline needs: the lecture's arm, gripper and bins for the default robot, and any robot's
+joints, gripper and pads sized from the robot."""
 
 from __future__ import annotations
 
@@ -9,25 +11,26 @@ import mujoco
 import numpy as np
 import pytest
 
+from pickplace import loader
 from pickplace.errors import SceneError, UnknownNameError
-from pickplace.scene import DEFAULT_SCENE, SceneNames, load_scene
-from tests.conftest import scene_files
+from pickplace.loader import load_scene
+from pickplace.robot import DEFAULT_WORLD, bundled_robots
+from pickplace.scene import WorldNames
+from pickplace.sweep import SweepRequest, run_sweep
 
 # Sum of the iiwa 14 joint offsets along z plus the flange (issue 2): the flange height at q = 0.
 FLANGE_HEIGHT_AT_ZERO = 0.1575 + 0.2025 + 0.2045 + 0.2155 + 0.1845 + 0.2155 + 0.081 + 0.045
 
 
-@pytest.mark.parametrize("path", scene_files(), ids=lambda p: p.name)
-def test_every_scene_compiles_and_steps_one_second_without_warnings(path: Path) -> None:
+@pytest.mark.parametrize("robot", bundled_robots())
+def test_every_composed_scene_compiles_and_steps_one_second_without_warnings(robot: str) -> None:
     messages: list[str] = []
     previous = mujoco.get_mju_user_warning()
     mujoco.set_mju_user_warning(messages.append)
     try:
-        model = mujoco.MjModel.from_xml_path(str(path))
-        data = mujoco.MjData(model)
-        key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
-        assert key >= 0, f"{path.name} has no 'home' keyframe"
-        mujoco.mj_resetDataKeyframe(model, data, key)
+        scene = load_scene(robot=robot)
+        model = scene.model
+        data = scene.make_data()
         for _ in range(round(1.0 / model.opt.timestep)):
             mujoco.mj_step(model, data)
     finally:
@@ -35,6 +38,35 @@ def test_every_scene_compiles_and_steps_one_second_without_warnings(path: Path) 
     assert messages == []
     assert [w.number for w in data.warning] == [0] * len(data.warning)
     assert np.all(np.isfinite(data.qpos))
+    # Held by its position actuators, the arm stays at home; nothing touches the world.
+    np.testing.assert_allclose(data.qpos[scene.arm_qpos_adr], scene.q_home, atol=2e-3)
+    assert not data.sensordata[scene.robot_world_sensor_adr].any()
+
+
+@pytest.mark.parametrize("robot", bundled_robots())
+def test_a_scene_is_sized_by_its_robot(robot: str) -> None:
+    scene = load_scene(robot=robot)
+    n = scene.n_joints
+    for array in (scene.arm_joint_ids, scene.q_min, scene.q_max, scene.v_max, scene.q_home):
+        assert array.shape == (n,)
+    assert scene.arm_model.nq == scene.arm_model.nv == n
+    assert len(scene.gripper_actuator_ids) == scene.ctrl_for_width(0.05).shape[0]
+    assert scene.gripper_qpos_for_width(0.05).shape == scene.gripper_qpos_adr.shape
+    # The home keyframe holds the gripper open as the plans open it (at most 0.10 m).
+    data = scene.make_data()
+    assert scene.gripper_gap(data) == pytest.approx(min(0.10, scene.gripper_open_width), abs=1e-4)
+    # Robot bodies are the arm's and the gripper's; every other body with geoms is the world.
+    robot_bodies = set(np.flatnonzero(scene.robot_body_mask).tolist())
+    assert set(scene.robot.robot_body_ids.tolist()) == robot_bodies
+    assert not robot_bodies & set(scene.world_contact_body_ids.tolist())
+    assert scene.brick_body_id not in scene.world_contact_body_ids
+
+
+def test_every_call_gets_its_own_model_and_shares_the_arm_model() -> None:
+    a, b = load_scene(), load_scene()
+    assert a.model is not b.model and a.arm_model is b.arm_model
+    a.model.body_mass[a.brick_body_id] = 30.0
+    assert b.model.body_mass[b.brick_body_id] == pytest.approx(0.2)
 
 
 def test_scene_options_suit_a_friction_grasp(scene) -> None:
@@ -65,10 +97,10 @@ def test_arm_has_seven_limited_hinges_in_one_chain(scene) -> None:
 def test_tool_site_lies_between_the_pads_with_z_along_the_approach(scene) -> None:
     data = scene.make_data()
     p_tool = data.site_xpos[scene.tool_site_id]
-    p_pads = data.geom_xpos[list(scene.pad_geom_ids)]
+    p_pads = data.geom_xpos[np.concatenate(scene.pad_geom_ids)]
     np.testing.assert_allclose(p_tool, p_pads.mean(axis=0), atol=1e-9)
     z_tool = data.site_xmat[scene.tool_site_id].reshape(3, 3)[:, 2]
-    p_flange = data.site_xpos[scene.flange_site_id]
+    p_flange = data.site_xpos[scene.model.site("arm/attachment_site").id]
     approach = (p_tool - p_flange) / np.linalg.norm(p_tool - p_flange)
     np.testing.assert_allclose(z_tool, approach, atol=1e-9)
 
@@ -85,16 +117,20 @@ def test_brick_starts_inside_bin1_and_stays_at_rest(scene) -> None:
     assert np.linalg.norm(v) < 1e-3
 
 
-@pytest.mark.parametrize("gap", [0.0, 0.11, 0.05])
-def test_empty_gripper_reaches_the_commanded_gap(gap: float) -> None:
-    scene = load_scene()
+@pytest.mark.parametrize("robot", bundled_robots())
+@pytest.mark.parametrize("gap", [0.0, 0.03, 0.07])
+def test_empty_gripper_reaches_the_commanded_gap(robot: str, gap: float) -> None:
+    scene = load_scene(robot=robot)
     m = scene.model
     data = scene.make_data()
-    data.ctrl[scene.gripper_actuator_id] = gap
+    data.ctrl[scene.gripper_actuator_ids] = scene.ctrl_for_width(gap)
     for _ in range(round(1.0 / m.opt.timestep)):
         mujoco.mj_step(m, data)
-    measured = float(np.sum(data.qpos[scene.finger_qpos_adr]))
-    assert abs(measured - gap) < 0.002
+    expected = max(gap, scene.robot.closed_width)
+    assert abs(scene.gripper_gap(data) - expected) < 0.002
+    # The logged body poses give the same gap.
+    batch = scene.gripper_gaps(data.xpos[None], data.xquat[None])
+    np.testing.assert_allclose(batch, [scene.gripper_gap(data)], atol=1e-12)
 
 
 def test_flange_at_zero_is_straight_above_the_base_and_the_jacobian_has_rank_three(
@@ -104,11 +140,12 @@ def test_flange_at_zero_is_straight_above_the_base_and_the_jacobian_has_rank_thr
     data = mujoco.MjData(m)
     mujoco.mj_forward(m, data)  # qpos0: every arm joint at 0
     assert np.all(data.qpos[scene.arm_qpos_adr] == 0)
-    p_flange = data.site_xpos[scene.flange_site_id]
-    p_base = data.xpos[m.body("base").id]
+    flange = scene.model.site("arm/attachment_site").id
+    p_flange = data.site_xpos[flange]
+    p_base = data.xpos[m.body("arm/base").id]
     np.testing.assert_allclose(p_flange - p_base, [0, 0, FLANGE_HEIGHT_AT_ZERO], atol=1e-3)
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
-    mujoco.mj_jacSite(m, data, jacp, jacr, scene.flange_site_id)
+    mujoco.mj_jacSite(m, data, jacp, jacr, flange)
     J = np.vstack([jacp, jacr])[:, scene.arm_dof_adr]
     sigma = np.linalg.svd(J, compute_uv=False)
     assert np.all(sigma[:3] > 0.1)
@@ -135,14 +172,14 @@ def test_bins_are_reachable_open_boxes_on_two_sides(scene) -> None:
     assert swing >= 60.0
 
 
-def test_unknown_name_lists_the_names_that_exist() -> None:
-    with pytest.raises(UnknownNameError, match=r"unknown site 'tcp'; valid: .*wsg50/tool"):
-        load_scene(names=SceneNames(tool_site="tcp"))
-    with pytest.raises(UnknownNameError, match=r"unknown joint 'joint8'; valid: .*joint7"):
-        load_scene(names=SceneNames(arm_joints=(*SceneNames().arm_joints[:6], "joint8")))
+def test_unknown_world_name_lists_the_names_that_exist() -> None:
+    with pytest.raises(UnknownNameError, match=r"unknown body 'bin3'; valid: .*bin1, bin2"):
+        load_scene(names=WorldNames(target_bin="bin3"))
+    with pytest.raises(UnknownNameError, match=r"unknown geom 'block'; valid: .*brick"):
+        load_scene(names=WorldNames(brick_geom="block"))
 
 
-def test_missing_and_invalid_scene_files(tmp_path: Path) -> None:
+def test_missing_and_invalid_world_files(tmp_path: Path) -> None:
     with pytest.raises(SceneError, match="does not exist"):
         load_scene(tmp_path / "missing.xml")
     bad = tmp_path / "bad.xml"
@@ -151,6 +188,29 @@ def test_missing_and_invalid_scene_files(tmp_path: Path) -> None:
         load_scene(bad)
 
 
-def test_relative_scene_path_loads(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.chdir(DEFAULT_SCENE.parent.parent)
-    assert load_scene(Path("scenes") / "scene.xml").model.nu == 8
+def test_relative_world_path_loads(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(DEFAULT_WORLD.parent.parent)
+    assert load_scene(Path("scenes") / "world.xml").model.nu == 8
+
+
+def test_an_edited_world_is_composed_again(tmp_path: Path) -> None:
+    """The cache is keyed by content: the same file name with other contents is another scene."""
+    world = tmp_path / "world.xml"
+    text = DEFAULT_WORLD.read_text()
+    world.write_text(text)
+    assert load_scene(world).source_bin.center_W[1] == pytest.approx(-0.55)
+    world.write_text(
+        text.replace('<body name="bin1" pos="0 -0.55 0">', '<body name="bin1" pos="0 -0.5 0">')
+    )
+    assert load_scene(world).source_bin.center_W[1] == pytest.approx(-0.5)
+
+
+def test_a_sweep_composes_its_robot_once_per_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Trials copy the cached scene's model; composing and calibrating happens once."""
+    loader.clear_scene_cache()
+    calls = []
+    compose = loader.load_robot
+    monkeypatch.setattr(loader, "load_robot", lambda *a, **k: calls.append(1) or compose(*a, **k))
+    report = run_sweep(SweepRequest("pick-place", "qp", 3, 0, 1, robot="panda-hand"))
+    assert report["successes"] == 3
+    assert len(calls) == 1

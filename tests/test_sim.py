@@ -2,17 +2,17 @@
 
 from __future__ import annotations
 
-import shutil
-from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
 import pytest
 
+from pickplace.controllers import make_controller
 from pickplace.errors import InvalidInputError
+from pickplace.loader import load_scene
 from pickplace.runner import RunRequest, prepare
-from pickplace.scene import SCENES_DIR
+from pickplace.scenarios import BuildRequest, get_scenario
 from pickplace.sim import Simulation
 from pickplace.verdict import WALL_TIME_FIELDS
 
@@ -55,10 +55,11 @@ def _contact_forces(sim: Simulation) -> np.ndarray:
     f6 = np.zeros(6)
     for i in range(d.ncon):
         pair = {int(d.contact.geom1[i]), int(d.contact.geom2[i])}
-        for side, pad in enumerate(sim.scene.pad_geom_ids):
-            if pair == {pad, sim.scene.brick_geom_id}:
-                mujoco.mj_contactForce(m, d, i, f6)
-                out[side] += f6[0]
+        for side, pads in enumerate(sim.scene.pad_geom_ids):
+            for pad in pads.tolist():
+                if pair == {pad, sim.scene.brick_geom_id}:
+                    mujoco.mj_contactForce(m, d, i, f6)
+                    out[side] += f6[0]
     return out
 
 
@@ -78,19 +79,17 @@ def test_pad_sensors_equal_the_contact_forces_and_the_log_keeps_them() -> None:
         np.testing.assert_allclose(sim.pad_forces(), expected, rtol=1e-12, atol=1e-9)
         np.testing.assert_array_equal(sim.log.pad_force[sim.ticks - 1], sim.pad_forces())
         seen.append(expected.min())
-    # The gripper's 40 N force limit is what squeezes once the pads touch.
-    assert max(seen) == pytest.approx(sim.scene.gripper_force_limit, rel=0.05)
+    # The squeeze measured in calibration (the WSG-like gripper's 40 N force limit) is what
+    # squeezes once the pads touch.
+    assert max(seen) == pytest.approx(sim.scene.squeeze_force, rel=0.05)
+    assert sim.scene.squeeze_force == pytest.approx(40.0, rel=1e-3)
 
 
-def test_too_few_sensor_slots_are_reported(tmp_path: Path) -> None:
+def test_too_few_sensor_slots_are_reported() -> None:
     """A pad sensor with 2 slots misses 2 of the 4 contact points: the loop says so."""
-    for f in SCENES_DIR.glob("*.xml"):
-        shutil.copy(f, tmp_path / f.name)
-    scene_xml = tmp_path / "scene.xml"
-    text = scene_xml.read_text()
-    assert text.count('num="8"') == 2
-    scene_xml.write_text(text.replace('num="8"', 'num="2"'))
-    _, _, sim = prepare(RunRequest(scene_path=scene_xml))
+    scene = load_scene(pad_slots=2)
+    task = get_scenario("pick-place").build(BuildRequest(scene, "pick-place", 0))
+    sim = Simulation(scene, task, make_controller("qp", scene, 0.01))
     assert sim.scene.pad_force_slots == 2
     sim.advance(_grasp_tick(sim) + 20)
     warnings = [e for e in sim.events if e.kind == "sensor"]
