@@ -615,7 +615,7 @@ class Recorder:
 
     Args:
         path: ``.rrd`` file to write, or None.
-        recording_id: Recording id, e.g. ``pick-place/qp/seed-0``.
+        recording_id: Recording id, e.g. ``pick-place/iiwa14-wsg50/qp/seed-0``.
         spawn: Also spawn a Rerun viewer (or use the one on port :data:`SPAWN_PORT`) and
             stream to it.
         connect: Also stream to a viewer at this gRPC URL

@@ -91,10 +91,10 @@ class RunRequest:
     speed: float = 1.0
     observers: Sequence[TickObserver] = field(default=(), compare=False)
 
-    @property
-    def recording_id(self) -> str:
-        """Recording id naming scenario, controller and seed."""
-        return f"{self.scenario}/{self.controller}/seed-{self.seed}"
+    def recording_id(self, robot_name: str) -> str:
+        """Recording id naming scenario, robot, controller and seed (a viewer merges the data
+        of recordings with one id: runs that differ in any of these must not share one)."""
+        return f"{self.scenario}/{robot_name}/{self.controller}/seed-{self.seed}"
 
 
 _FILE_KINDS = {
@@ -414,7 +414,10 @@ def _build(req: RunRequest) -> tuple[Scene, Task, Simulation, Recorder | None]:
         from pickplace.recording import Recorder  # rerun is imported only when recording
 
         recorder = Recorder(
-            req.record, recording_id=req.recording_id, spawn=req.spawn, connect=req.connect
+            req.record,
+            recording_id=req.recording_id(scene.robot.name),
+            spawn=req.spawn,
+            connect=req.connect,
         )
         observers.append(recorder)
     sim = Simulation(scene, task, controller, config, observers)

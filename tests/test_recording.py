@@ -121,6 +121,20 @@ def test_application_and_recording_id(recording: Recording) -> None:
     assert stores[0].recording_id == RECORDING_ID
 
 
+def test_a_run_s_recording_id_names_its_robot(tmp_path: Path) -> None:
+    """Two runs that differ only in the robot must not merge in one viewer."""
+    from pickplace.runner import RunRequest, run
+
+    ids = set()
+    for robot in ("iiwa14-wsg50", "panda-hand"):
+        path = tmp_path / f"{robot}.rrd"
+        run(RunRequest(scenario="pick-place", robot=robot, record=path))
+        (store,) = RrdReader(path).recordings()
+        assert store.recording_id == f"pick-place/{robot}/qp/seed-0"
+        ids.add(store.recording_id)
+    assert len(ids) == 2
+
+
 def test_blueprint_is_embedded(recording: Recording) -> None:
     assert recording.reader.blueprints()
 
