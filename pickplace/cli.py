@@ -24,11 +24,14 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from pickplace.errors import OutputError, PickPlaceError
 from pickplace.robot import DEFAULT_ROBOT
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
+
+if TYPE_CHECKING:
+    from pickplace.runner import RunRequest
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; other signals give 128 + their number
@@ -110,6 +113,22 @@ def _default_workers() -> int:
     return available_cpus()
 
 
+def _add_task_options(p: argparse.ArgumentParser) -> None:
+    """The options that define a task, shared by ``run`` and ``plan``."""
+    p.add_argument("--scene", type=Path, help=SCENE_HELP)
+    p.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
+    p.add_argument("--scenario", default="pick-place", help="scenario name (pickplace scenarios)")
+    p.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
+    p.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
+    p.add_argument(
+        "--speed",
+        type=_finite_float,
+        default=1.0,
+        help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pickplace``."""
     parser = _Parser(
@@ -121,12 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate one scenario")
-    run.add_argument("--scene", type=Path, help=SCENE_HELP)
-    run.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
-    run.add_argument("--scenario", default="pick-place", help="scenario name (pickplace scenarios)")
-    run.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
-    run.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
-    run.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
+    _add_task_options(run)
     run.add_argument(
         "--record",
         type=_record_path,
@@ -142,31 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="IK rate [Hz], a whole number of physics steps in [100, 1000] (default: 100)",
     )
     run.add_argument("--pace", type=_finite_float, help="run at most this many times real time")
-    run.add_argument(
-        "--speed",
-        type=_finite_float,
-        default=1.0,
-        help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
-    )
     run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     plan = sub.add_parser(
         "plan", help="plan a scenario and pre-flight its candidates, without physics"
     )
-    plan.add_argument("--scene", type=Path, help=SCENE_HELP)
-    plan.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
-    plan.add_argument(
-        "--scenario", default="pick-place", help="scenario name (pickplace scenarios)"
-    )
-    plan.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
-    plan.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
-    plan.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
-    plan.add_argument(
-        "--speed",
-        type=_finite_float,
-        default=1.0,
-        help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
-    )
+    _add_task_options(plan)
     plan.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     sub.add_parser("scenarios", help="list the scenarios").add_argument(
@@ -358,27 +353,37 @@ def _human_summary(s: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.runner import RunRequest, execute
+def _task_request(args: argparse.Namespace, **more: Any) -> RunRequest:
+    """The run request of :func:`_add_task_options`' options, with ``more`` fields."""
+    from pickplace.runner import RunRequest
     from pickplace.scenarios import BrickPlacement
 
-    progress = None if args.json else _progress(1.0, f"{args.scenario}")
-    observers: list[Any] = [InterruptGate(stop)]
-    if progress is not None:
-        observers.append(_ProgressObserver(progress))
-    req = RunRequest(
+    return RunRequest(
         scenario=args.scenario,
         controller=args.controller,
         seed=args.seed,
         brick=BrickPlacement(*args.brick) if args.brick is not None else None,
         scene_path=args.scene,
         robot=args.robot,
+        speed=args.speed,
+        **more,
+    )
+
+
+def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
+    from pickplace.runner import execute
+
+    progress = None if args.json else _progress(1.0, f"{args.scenario}")
+    observers: list[Any] = [InterruptGate(stop)]
+    if progress is not None:
+        observers.append(_ProgressObserver(progress))
+    req = _task_request(
+        args,
         record=args.record,
         spawn=args.spawn,
         connect=args.connect,
         control_rate_hz=args.control_rate,
         pace=args.pace,
-        speed=args.speed,
         observers=observers,
     )
     outcome = execute(req)
@@ -402,18 +407,9 @@ def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.robot import resolve_description
-    from pickplace.runner import RunRequest, plan_report
-    from pickplace.scenarios import BrickPlacement
+    from pickplace.runner import plan_report
 
-    req = RunRequest(
-        scenario=args.scenario,
-        controller=args.controller,
-        seed=args.seed,
-        brick=BrickPlacement(*args.brick) if args.brick is not None else None,
-        scene_path=args.scene,
-        robot=args.robot,
-        speed=args.speed,
-    )
+    req = _task_request(args)
     report = plan_report(req)
     out = {
         "scenario": req.scenario,

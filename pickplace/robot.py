@@ -31,7 +31,7 @@ from pickplace.gripper_calibration import (
 from pickplace.mjcf_parts import load_part, part_digest
 from pickplace.robot_description import RobotDescription
 from pickplace.robot_parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
-from pickplace.robot_physics import set_stiff_pad
+from pickplace.robot_physics import set_stiff_pad, unique_name
 
 ARM_PREFIX = "arm/"
 """Prefix of the arm's element names in the composed scene."""
@@ -245,11 +245,7 @@ def _compose(
     gspec = gripper.spec.copy()
     for pad in calibration.pads[0] + calibration.pads[1]:
         set_stiff_pad(gspec.geom(pad), options.timestep)
-    taken = {s.name for s in gspec.sites}
-    tool, k = TOOL_SITE, 1
-    while tool in taken:
-        k += 1
-        tool = f"{TOOL_SITE}_{k}"
+    tool = unique_name({s.name for s in gspec.sites}, TOOL_SITE)
     gspec.body(calibration.root_body).add_site(
         name=tool,
         pos=list(calibration.pos_BG),

@@ -37,6 +37,7 @@ from pickplace.robot_physics import (
     set_gravcomp,
     set_gripper_joint_minimums,
     set_robot_contacts,
+    unique_name,
 )
 
 _HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
@@ -184,7 +185,7 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
                 f"({', '.join(a.name or '#' + str(a.index) for a in acts)}); valid: one"
             )
         if not acts:
-            actuator = spec.add_actuator(name=_unique(existing, name))
+            actuator = spec.add_actuator(name=unique_name(existing, name))
             existing.add(actuator.name)
             actuator.trntype = mujoco.mjtTrn.mjTRN_JOINT
             actuator.target = name
@@ -199,7 +200,7 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
             a = acts[0]
             actuator = spec.actuators[a.index]
             if not a.name:
-                actuator.name = _unique(existing, name)
+                actuator.name = unique_name(existing, name)
                 existing.add(actuator.name)
             if a.kind == "motor":
                 motor_to_position(actuator, ARM_KP, a.force_limit, rng)
@@ -233,14 +234,6 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
         flange_quat=flange_quat,
         repairs=tuple(repairs),
     )
-
-
-def _unique(existing: set[str], name: str) -> str:
-    candidate, k = name, 1
-    while candidate in existing:
-        k += 1
-        candidate = f"{name}_{k}"
-    return candidate
 
 
 @dataclass(frozen=True)
@@ -327,7 +320,7 @@ def prepare_gripper(part: Part, desc: RobotDescription) -> PreparedGripper:
     existing = {a.name for a in spec.actuators if a.name}
     for i, actuator in enumerate(spec.actuators):
         if not actuator.name:
-            actuator.name = _unique(existing, f"actuator{i}")
+            actuator.name = unique_name(existing, f"actuator{i}")
             existing.add(actuator.name)
     file_actuators = tuple(a.name for a in spec.actuators)
     model = _compile(spec, part)

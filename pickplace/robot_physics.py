@@ -219,7 +219,8 @@ class Coupling:
         return 0.5 * (self.signs[0] * float(commands[0]) + self.signs[1] * float(commands[1]))
 
 
-def _unique(existing: set[str], name: str) -> str:
+def unique_name(existing: set[str], name: str) -> str:
+    """``name``, or ``name_2``, ``name_3`` … : the first not in ``existing``."""
     candidate, k = name, 1
     while candidate in existing:
         k += 1
@@ -256,7 +257,7 @@ def couple_fingers(
     offset = c2 - ratio * c1
 
     names = {t.name for t in spec.tendons}
-    tendon = spec.add_tendon(name=_unique(names, "finger_coupling"))
+    tendon = spec.add_tendon(name=unique_name(names, "finger_coupling"))
     tendon.wrap_joint(n1, 0.5 * s1)
     tendon.wrap_joint(n2, 0.5 * s2)
 
@@ -276,7 +277,7 @@ def couple_fingers(
     for a in actuators:
         spec.delete(spec.actuators[[x.name for x in spec.actuators].index(a.name)])
     act_names = {a.name for a in spec.actuators}
-    act = spec.add_actuator(name=_unique(act_names, "fingers"))
+    act = spec.add_actuator(name=unique_name(act_names, "fingers"))
     act.trntype = mujoco.mjtTrn.mjTRN_TENDON
     act.target = tendon.name
     act.set_to_position(kp=2.0 * kp, dampratio=1.0)
