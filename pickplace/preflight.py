@@ -182,7 +182,9 @@ class Preflight:
         self.model = collision_model(scene, self.config.detection_distance)
         self.data = mujoco.MjData(self.model)
         self._names = scene.arm_joint_names
-        self._world = np.array([scene.is_world_geom(g) for g in range(self.model.ngeom)])
+        ng = self.model.ngeom
+        self._world = np.array([scene.is_world_geom(g) for g in range(ng)])
+        self._robot = np.array([scene.is_robot_geom(g) for g in range(ng)])
         self._gripper_qpos_adr = scene.gripper_qpos_adr
         self._width = math.nan  # the last width loaded, and its gripper joint positions
         self._gripper_qpos = scene.gripper_qpos_for_width(0.0)
@@ -381,8 +383,7 @@ class Preflight:
         """Per geom pair: 1 robot-world, 2 brick-world (not a geom it rests on at the start or
         the end), 0 not checked; shape (ngeom, ngeom), symmetric."""
         ng, sc = self.model.ngeom, self.scene
-        robot = np.array([sc.is_robot_geom(g) for g in range(ng)])
-        world = np.array([sc.is_world_geom(g) for g in range(ng)])
+        robot, world = self._robot, self._world
         kinds = np.zeros((ng, ng), dtype=np.int8)
         kinds[np.ix_(robot, world)] = 1
         kinds[np.ix_(world, robot)] = 1
