@@ -17,6 +17,11 @@ Every candidate's clearance via-point turns with the base swing (``via="swing"``
 :func:`pickplace.plan.plan_pick_place`). Measured on bin 1 (``planning-failures.md``): the
 180° twin rescues only wrist cases, the 90° grasp every wall case; the swing via-point every
 wrist case. If none is feasible the report says so, with each candidate's first problem.
+
+A brick that the grip cannot hold even at rest within the timing's slip budget (too heavy,
+too little friction or grip force: :class:`~pickplace.timing.GripTooWeakError`) makes the
+first candidate whose path passes the sweep infeasible with a ``grip`` problem, and planning
+stops there: no grasp or pose can carry it.
 """
 
 from __future__ import annotations
@@ -33,9 +38,9 @@ from mink.lie import SE3, SO3
 from pickplace.grasp import brick_width_across, top_down_grasps, yaw_of
 from pickplace.kinematics import ArmKinematics
 from pickplace.plan import Plan, PlanConfig, plan_pick_place, swung_pose
-from pickplace.preflight import Preflight, PreflightConfig, PreflightResult
+from pickplace.preflight import Preflight, PreflightConfig, PreflightResult, Problem
 from pickplace.scene import Scene
-from pickplace.timing import SegmentLimits, TimingConfig, retime
+from pickplace.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 
 # Clearance of the via-point above the higher bin wall: brick height hanging below the tool
 # (0.025 m half-height) plus 0.1 m of air [m].
@@ -44,6 +49,9 @@ CLEARANCE_ABOVE_WALLS = 0.125
 # pre-flight ticks (for the collision checks and the joint path the timing works on).
 PATH_SPACING = 0.01
 PATH_ANGLE = 0.05
+# Problem kind of a candidate whose brick the grip cannot hold even at rest (within the slip
+# budget): no grasp and no pose can do better, so no further candidate is tried.
+GRIP_PROBLEM = "grip"
 
 
 @dataclass(frozen=True)
@@ -91,6 +99,13 @@ class PlanningReport:
     def feasible(self) -> bool:
         """True if a candidate is feasible."""
         return self.chosen is not None
+
+    @property
+    def grip_too_weak(self) -> bool:
+        """True if planning stopped because the grip cannot hold the brick even at rest (a
+        :data:`GRIP_PROBLEM`): the same for every pose of the brick."""
+        last = self.candidates[-1].preflight.problem if self.candidates else None
+        return self.chosen is None and last is not None and last.kind == GRIP_PROBLEM
 
     @property
     def plan(self) -> Plan:
@@ -198,6 +213,8 @@ class PickPlacePlanner:
                 chosen = len(tried) - 1
                 if first_feasible:
                     break
+            if result.problem is not None and result.problem.kind == GRIP_PROBLEM:
+                break  # no other grasp holds the brick better
         return PlanningReport(tuple(tried), chosen, time.perf_counter() - t0, self.preflight.config)
 
     def timed_plan(
@@ -227,7 +244,15 @@ class PickPlacePlanner:
                 self.scene.v_max, self.scene.a_max, self.slip_accel if carried else None
             )
 
-        timed = retime(path, swept.times, swept.q, holds, limits)
+        try:
+            timed = retime(path, swept.times, swept.q, holds, limits)
+        except GripTooWeakError as exc:
+            t_grip = path.phases.grip_closed if path.phases is not None else 0.0
+            p = X_WO_pick.translation()
+            problem = Problem(
+                t_grip, GRIP_PROBLEM, str(exc), (float(p[0]), float(p[1]), float(p[2]))
+            )
+            return path, replace(swept, problem=problem)
         return timed, self.preflight.run(timed, X_WO_pick, X_WO_place)
 
     def make_plan(

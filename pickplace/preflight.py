@@ -103,7 +103,8 @@ class Problem:
     Attributes:
         t: Plan time [s].
         kind: ``"ik"``, ``"joint-limit"``, ``"speed-limit"``, ``"singularity"`` or
-            ``"collision"``.
+            ``"collision"``; the planner adds ``"grip"`` (the brick cannot be carried, see
+            :data:`pickplace.planner.GRIP_PROBLEM`).
         text: One line for a person: what, where, how much.
         point_W: Where it happened in world [m]: the contact point, or the limited joint's
             anchor, or the tool.

@@ -254,14 +254,18 @@ def _nominal(req: BuildRequest) -> Task:
 
 def _random(req: BuildRequest) -> Task:
     """A brick pose drawn from the seed, drawn again (same generator) until the planner finds
-    a feasible plan, so the scenario always has one; a given ``--brick`` is planned as is."""
+    a feasible plan, so the scenario always has one; a given ``--brick`` is planned as is.
+
+    A brick the grip cannot hold at all (too heavy for it: no pose helps) keeps its first
+    drawn pose whose path was feasible, and the run ends with ``no-feasible-plan``.
+    """
     if req.brick is not None:
         return pick_place_task(req, req.brick)
     rng = np.random.default_rng(req.seed)
     planner = req.planner()
     for _ in range(MAX_RANDOM_DRAWS):
         task = pick_place_task(req, random_placement(req.scene, rng), planner=planner)
-        if task.planning is not None and task.planning.feasible:
+        if task.planning is not None and (task.planning.feasible or task.planning.grip_too_weak):
             return task
     raise PlanError(
         f"no feasible brick pose in bin 1 after {MAX_RANDOM_DRAWS} draws from seed {req.seed}"

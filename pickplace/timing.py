@@ -43,6 +43,11 @@ GRAVITY_W = np.array([0.0, 0.0, -9.81])
 _TINY = 1e-12
 
 
+class GripTooWeakError(PlanError):
+    """The pads' friction cannot hold the carried brick even at rest, within the slip budget:
+    no timing of any path can carry it (it does not depend on the brick's pose or the grasp)."""
+
+
 @dataclass(frozen=True)
 class SegmentLimits:
     """Limits of one motion segment, in the units of the path.
@@ -225,10 +230,12 @@ def time_optimal_profile(
     if limits.slip_accel is not None:
         budget = limits.slip_accel / root3
         if budget < float(np.max(np.abs(GRAVITY_W))):
-            raise PlanError(
-                f"the carried brick would slip even at rest (its grip holds "
-                f"{limits.slip_accel:.2f} m/s² against gravity's 9.81): it is too heavy for "
-                "the grip"
+            g_abs = float(np.max(np.abs(GRAVITY_W)))
+            raise GripTooWeakError(
+                f"the carried brick would slip even at rest: the slip budget (the pads' "
+                f"friction over the safety factor) allows {limits.slip_accel:.2f} m/s² against "
+                f"gravity, √3 · {g_abs:.2f} = {root3 * g_abs:.2f} m/s² is needed (the budget "
+                "is checked per axis); the brick is too heavy for the grip"
             )
         g = np.broadcast_to(GRAVITY_W, dp.shape)
         cs += [dp, -dp]
