@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from pickplace.errors import OutputError, PickPlaceError
+from pickplace.errors import InvalidInputError, OutputError, PickPlaceError
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
@@ -101,12 +101,6 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
-def _default_workers() -> int:
-    from pickplace.sweep import available_cpus
-
-    return available_cpus()
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pickplace``."""
     parser = _Parser(
@@ -144,6 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=1.0,
         help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
     )
+    _add_vary(
+        run,
+        "the parameters are drawn from --seed exactly as a sweep draws them, so a "
+        "sweep trial's re-run command reproduces it; NAME=VALUE fixes a value",
+    )
     run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     plan = sub.add_parser(
@@ -162,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=1.0,
         help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
     )
+    _add_vary(plan, "drawn from --seed as in pickplace run")
     plan.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     sub.add_parser("scenarios", help="list the scenarios").add_argument(
@@ -174,7 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="pick-place-random",
         help="scenario name (default: pick-place-random; see pickplace scenarios)",
     )
-    sweep.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    sweep.add_argument("--controller", default=None, help="qp (default), pinv or dls")
     sweep.add_argument(
         "--trials", type=_positive_int, default=20, help="number of trials (default: 20)"
     )
@@ -185,11 +185,64 @@ def build_parser() -> argparse.ArgumentParser:
         "--workers",
         type=_positive_int,
         default=None,
-        help="parallel processes (default: one per CPU this process may use); 1 runs the "
-        "trials in this process",
+        help="parallel processes (default: one per CPU this process may use; 1 runs the "
+        "trials in this process); with --backend ray the local cluster's CPUs, or the tasks in "
+        "flight on a cluster at --address (default: its CPUs)",
+    )
+    _add_vary(sweep, "drawn per trial from its seed, recorded per trial in the report")
+    sweep.add_argument(
+        "--compare",
+        metavar="KEY=A,B",
+        help="run every seed once per value, with the same parameters, and compare the success "
+        "rates paired by seed, e.g. controller=qp,dls",
+    )
+    sweep.add_argument(
+        "--speed",
+        type=_finite_float,
+        default=1.0,
+        help="speed override in (0, 1] for every trial (or --vary speed=...)",
+    )
+    sweep.add_argument(
+        "--control-rate",
+        type=_finite_float,
+        default=100.0,
+        help="IK rate [Hz] of every trial (default: 100; or --vary control_rate=a,b)",
+    )
+    sweep.add_argument(
+        "--backend",
+        choices=("process", "ray"),
+        default="process",
+        help="process (default): this machine's processes; ray: Ray tasks (pip install "
+        "'pickplace[ray]')",
+    )
+    sweep.add_argument(
+        "--address",
+        metavar="ADDR",
+        help="with --backend ray: a running cluster's address (HOST:PORT, auto or "
+        "ray://HOST:PORT); default: start a local cluster for the sweep",
+    )
+    sweep.add_argument(
+        "--record",
+        type=_record_path,
+        metavar="FILE.rrd",
+        help="write the sweep as a Rerun recording (start poses by outcome, success rate per "
+        "varied parameter, the report); it appears there complete when the sweep ends",
     )
     sweep.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     return parser
+
+
+def _add_vary(parser: argparse.ArgumentParser, how: str) -> None:
+    from pickplace.vary import valid_parameters
+
+    parser.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="NAME=LOW:HIGH|NAME=a,b,c",
+        help=f"vary a parameter, uniform in [LOW, HIGH] or over a grid; repeatable; {how}. "
+        f"Names: {valid_parameters()}",
+    )
 
 
 # The command-line option of each input a library error can name (InvalidInputError.field).
@@ -204,6 +257,7 @@ OPTION_OF_FIELD = {
     "control_rate_hz": "--control-rate",
     "pace": "--pace",
     "speed": "--speed",
+    "address": "--address",
 }
 
 
@@ -348,6 +402,15 @@ def _human_summary(s: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _draw(texts: Sequence[str], seed: int) -> Any:
+    """The parameters ``--vary`` draws for ``seed`` (None without ``--vary``)."""
+    if not texts:
+        return None
+    from pickplace.vary import parse_vary
+
+    return parse_vary(texts).draw(seed)
+
+
 def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.runner import RunRequest, execute
     from pickplace.scenarios import BrickPlacement
@@ -368,6 +431,7 @@ def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
         control_rate_hz=args.control_rate,
         pace=args.pace,
         speed=args.speed,
+        parameters=_draw(args.vary, args.seed),
         observers=observers,
     )
     outcome = execute(req)
@@ -400,6 +464,7 @@ def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
         brick=BrickPlacement(*args.brick) if args.brick is not None else None,
         scene_path=args.scene,
         speed=args.speed,
+        parameters=_draw(args.vary, args.seed),
     )
     report = plan_report(req)
     out = {
@@ -460,53 +525,74 @@ def _cmd_scenarios(args: argparse.Namespace, stop: InterruptHandler) -> int:
     return EXIT_OK
 
 
-def _human_sweep(report: dict[str, Any]) -> str:
-    p50, p95 = report["place_error_p50_m"], report["place_error_p95_m"]
-    rate = report["trials_per_second"]
-    lines = [
-        f"{report['scenario']} / {report['controller']}: {report['successes']}/"
-        f"{report['completed']} succeeded ({report['success_rate']:.0%})"
-        + (f" of {report['trials']} requested" if report["completed"] < report["trials"] else "")
-        + (f", {rate:.2f} trials/s" if rate is not None else "")
-        + f" with {report['workers']} worker(s)"
-    ]
-    if report["interrupted"]:
-        lines.append("  interrupted: the trials not finished are left out")
-    if p50 is not None:
-        lines.append(f"  place error p50 {p50 * 1000:.2f} mm, p95 {p95 * 1000:.2f} mm")
-    if report["min_singular_value"] is not None:
-        lines.append(f"  min singular value {report['min_singular_value']:.4f}")
-    for reason, seeds in report["failed_seeds"].items():
-        lines.append(f"  {reason}: seeds {' '.join(map(str, seeds))}")
-    return "\n".join(lines)
-
-
 def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.sweep import SweepRequest, run_sweep
+    from pickplace.outfile import OutputFile
+    from pickplace.runner import validate_record_path
+    from pickplace.sweep import SweepRequest, parse_compare, run_sweep
+    from pickplace.sweep_report import report_text
+    from pickplace.vary import parse_vary
 
-    workers = args.workers if args.workers is not None else _default_workers()
-    req = SweepRequest(args.scenario, args.controller, args.trials, args.seed, workers)
+    compare = parse_compare(args.compare) if args.compare else None
+    if args.controller is not None and compare is not None and compare.key == "controller":
+        raise InvalidInputError(
+            "--controller and --compare controller=... both set the controller; give one"
+        )
+    req = SweepRequest(
+        scenario=args.scenario,
+        controller=args.controller or "qp",
+        trials=args.trials,
+        first_seed=args.seed,
+        workers=args.workers,
+        vary=parse_vary(args.vary),
+        compare=compare,
+        speed=args.speed,
+        control_rate_hz=args.control_rate,
+        backend=args.backend,
+        address=args.address,
+    )
     req.validate()
-    progress = None if args.json else _progress(float(args.trials), f"sweep {args.scenario}")
-    if progress is not None:
-        progress.start()
-
-    def advance(_: dict[str, Any]) -> None:
-        if progress is not None:
-            progress.advance(progress.tasks[0].id)
-
-    stop.arm()
+    output = None
+    if args.record is not None:
+        validate_record_path(args.record)
+        output = OutputFile(args.record)
+        output.open()  # one writer per path: refused now, not after the sweep
     try:
-        report = run_sweep(req, on_trial=advance)
-    finally:
-        stop.disarm()
+        progress = None if args.json else _progress(float(req.runs), f"sweep {args.scenario}")
         if progress is not None:
-            progress.stop()
-    _write_stdout(json.dumps(report) if args.json else _human_sweep(report))
+            progress.start()
+
+        def advance(_: dict[str, Any]) -> None:
+            if progress is not None:
+                progress.advance(progress.tasks[0].id)
+
+        stop.arm()
+        try:
+            report = run_sweep(req, on_trial=advance)
+        finally:
+            stop.disarm()
+            if progress is not None:
+                progress.stop()
+        record_error = None
+        if output is not None:
+            from pickplace.sweep_recording import record_sweep
+
+            try:
+                report["recording"] = str(record_sweep(output, req, report))
+            except OutputError as exc:
+                record_error = str(exc)
+                report["recording"] = None
+    finally:
+        if output is not None:
+            output.discard()  # nothing left to do after a commit
+    _write_stdout(json.dumps(report) if args.json else report_text(report))
+    if record_error is not None:
+        _print_error(record_error)
     if report["interrupted"]:
         _to_stderr(f"pickplace: stopped by {signal_name(stop.signum or 2)}")
         return stop.exit_code
-    return EXIT_OK if report["successes"] == report["trials"] else EXIT_FAILED
+    if record_error is not None:
+        return EXIT_OUTPUT
+    return EXIT_OK if report["successes"] == report["runs"] else EXIT_FAILED
 
 
 def main(argv: Sequence[str] | None = None) -> int:

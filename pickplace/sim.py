@@ -536,6 +536,7 @@ class Simulation:
             planning_time_s=(
                 None if self.task.planning is None else self.task.planning.planning_time_s
             ),
+            parameters=self.task.parameters,
         )
 
 

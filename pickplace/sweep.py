@@ -1,46 +1,88 @@
-"""Many trials of one scenario in parallel processes, summarised as one report.
+"""Many trials of one scenario, on this machine's processes or a Ray cluster, as one report.
 
-Trial ``i`` runs with seed ``first_seed + i``, so a failing trial can be re-run alone with
-``pickplace run --scenario NAME --seed SEED``. Results are ordered by seed and do not depend on
-the number of workers.
+Trial ``i`` runs with seed ``first_seed + i``. Its varied parameters (``--vary``,
+:mod:`pickplace.vary`) are drawn from that seed alone, so any trial re-runs alone with the
+command the report prints for it (``pickplace run --scenario NAME --seed SEED --vary ...``),
+whatever the order, the backend or the number of workers. With ``--compare KEY=A,B`` every
+seed runs once per value of KEY (e.g. ``controller=qp,dls``) with the same parameters: the
+runs are paired by seed (:mod:`pickplace.sweep_report` compares them).
 
-With more than one worker, each worker process runs one trial at a time and gets the next seed
-only when it returns a result, so nothing is queued in a worker:
+Backends (results are ordered by seed and do not depend on the backend):
 
-- A worker that dies (the OOM killer, a crash) fails its trial with reason ``worker-died``
-  (its seed is listed like any other failure); a new worker takes the next seed.
-- Ctrl-C, SIGTERM or SIGHUP (a KeyboardInterrupt in the calling thread) kills the workers at
-  once; the report covers the trials finished so far and says ``"interrupted": true``. Workers
-  ignore the terminal's Ctrl-C themselves: only this process decides.
+- ``process`` (default): with one worker the trials run in this process (an interrupt ends the
+  running trial, which is left out of the report). With more, each worker process runs one
+  trial at a time and gets the next one only when it returns a result, so nothing is queued in
+  a worker: a worker that dies (the OOM killer, a crash) fails its trial with reason
+  ``worker-died`` and a new worker takes the next trial; Ctrl-C, SIGTERM or SIGHUP (a
+  KeyboardInterrupt in the calling thread) kills the workers at once and the report covers
+  the trials finished so far, with ``"interrupted": true``. Workers ignore the terminal's
+  Ctrl-C themselves: only this process decides.
+- ``ray``: the trials are Ray tasks (:mod:`pickplace.sweep_ray`), on a running cluster
+  (``address``) or a local one started for the sweep; the same rules for dead workers and
+  interrupts.
 
-With one worker the trials run in this process; an interrupt ends the running trial, which is
-left out of the report.
+Each trial keeps only its compact summary (:data:`TRIAL_KEYS`, no event list, no plan), so
+memory grows by about a kilobyte per trial.
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 import multiprocessing as mp
 import os
+import shlex
 import signal
 import sys
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-import numpy as np
-
-from pickplace.errors import InvalidInputError
-from pickplace.runner import MAX_SEED, RunRequest, run, validate_request
+from pickplace.controllers import CONTROLLERS
+from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.planner import GRIP_PROBLEM
+from pickplace.runner import (
+    MAX_SEED,
+    RunRequest,
+    resolve_control_rate,
+    run,
+    validate_request,
+)
+from pickplace.scene import DEFAULT_SCENE, compile_scene
 from pickplace.signals import STOP_SIGNALS, ignore_in_child
+from pickplace.sweep_report import SWEEP_WALL_TIME_FIELDS, build_report
+from pickplace.vary import VaryPlan
 
 MAX_TRIALS = 100_000
 WORKER_DIED = "worker-died"
 WORKER_ERROR = "worker-error"
 POLL_PERIOD_S = 0.2  # the main loop wakes at least this often [s]
+BACKENDS = ("process", "ray")
+# What --compare can vary, each a field of TrialSpec (robot descriptions add "robot").
+COMPARABLE = ("controller",)
+# Summary keys a trial keeps (plus ``failure_text``, ``parameters`` and ``arm``): everything
+# the report and the recording use, nothing that measures the wall clock.
+TRIAL_KEYS = (
+    "scenario",
+    "controller",
+    "seed",
+    "success",
+    "failure",
+    "failure_tick",
+    "failure_time_s",
+    "brick_start_xyz",
+    "place_error_m",
+    "max_slip_m",
+    "cycle_time_s",
+    "min_singular_value",
+    "max_joint_speed_ratio",
+    "max_position_error_m",
+    "max_robot_world_contact_force_n",
+    "sim_time_s",
+)
 
 
 def available_cpus() -> int:
@@ -52,59 +94,320 @@ def available_cpus() -> int:
         return os.cpu_count() or 1
 
 
+# ---------------------------------------------------------------------- what a trial is
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """Everything one trial's run request holds but the seed (one arm of a comparison).
+
+    Attributes:
+        scenario: Scenario name.
+        controller: Controller name.
+        speed: Speed override in (0, 1] (unless ``speed`` is varied).
+        control_rate_hz: IK rate [Hz] (unless ``control_rate`` is varied).
+        vary: The varied parameters, drawn per trial from its seed.
+        arm: Label of the arm in a comparison, e.g. ``controller=dls`` ("" without one).
+    """
+
+    scenario: str = "pick-place-random"
+    controller: str = "qp"
+    speed: float = 1.0
+    control_rate_hz: float = 100.0
+    vary: VaryPlan = field(default_factory=VaryPlan)
+    arm: str = ""
+
+    def request(self, seed: int) -> RunRequest:
+        """The run request of the trial with ``seed``."""
+        return RunRequest(
+            scenario=self.scenario,
+            controller=self.controller,
+            seed=seed,
+            control_rate_hz=self.control_rate_hz,
+            speed=self.speed,
+            parameters=self.vary.draw(seed) if self.vary.specs else None,
+        )
+
+    def rerun_command(self, seed: int) -> str:
+        """The ``pickplace run`` command that re-runs the trial with ``seed`` alone."""
+        args = ["pickplace", "run", "--scenario", self.scenario]
+        args += ["--controller", self.controller, "--seed", str(seed)]
+        if self.speed != 1.0:
+            args += ["--speed", repr(self.speed)]
+        if self.control_rate_hz != 100.0:
+            args += ["--control-rate", repr(self.control_rate_hz)]
+        for spec in self.vary.specs:
+            args += ["--vary", spec.flag()]
+        return shlex.join(args)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """``--compare KEY=A,B``: every seed runs once per value of KEY.
+
+    Attributes:
+        key: What differs between the arms (one of :data:`COMPARABLE`).
+        values: Its values, at least two, all different, in the order given.
+    """
+
+    key: str
+    values: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        """Check the key, and that there are two or more distinct values."""
+        if self.key not in COMPARABLE:
+            raise InvalidInputError(
+                f"--compare {self.key}=...: can compare {', '.join(COMPARABLE)}, e.g. "
+                "--compare controller=qp,dls"
+            )
+        values = tuple(self.values)
+        if len(values) < 2 or len(set(values)) != len(values) or not all(values):
+            raise InvalidInputError(
+                f"--compare {self.key}= needs two or more different values, e.g. "
+                f"controller=qp,dls; got '{','.join(values)}'"
+            )
+        if self.key == "controller":
+            for v in values:
+                if v not in CONTROLLERS:
+                    raise UnknownNameError("controller", v, CONTROLLERS)
+        object.__setattr__(self, "values", values)
+
+    def flag(self) -> str:
+        """The ``--compare`` value, e.g. ``controller=qp,dls``."""
+        return f"{self.key}={','.join(self.values)}"
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"key": self.key, "values": list(self.values)}
+
+
+def parse_compare(text: str) -> Comparison:
+    """Parse ``KEY=A,B[,C...]``.
+
+    Raises:
+        InvalidInputError: Bad syntax, a key that cannot be compared, fewer than two values.
+        UnknownNameError: An unknown controller.
+    """
+    key, sep, rest = text.partition("=")
+    if not sep or not key.strip() or not rest.strip():
+        raise InvalidInputError(
+            f"--compare '{text}' must be KEY=A,B with KEY one of {', '.join(COMPARABLE)}, "
+            "e.g. controller=qp,dls"
+        )
+    return Comparison(key.strip(), tuple(v.strip() for v in rest.split(",")))
+
+
 @dataclass(frozen=True)
 class SweepRequest:
-    """A sweep: ``trials`` runs of ``scenario`` with seeds ``first_seed …`` on ``workers``
-    processes (default: one per available CPU, see :func:`available_cpus`)."""
+    """A sweep: ``trials`` seeds ``first_seed …`` of ``scenario``.
+
+    Attributes:
+        scenario: Scenario name.
+        controller: Controller name (not with ``compare`` on the controller).
+        trials: Number of seeds, in [1, :data:`MAX_TRIALS`].
+        first_seed: Seed of the first trial.
+        workers: Trials run at once: processes (default: one per available CPU, see
+            :func:`available_cpus`; 1 runs them in this process), or the local Ray
+            cluster's CPUs; on a Ray cluster at ``address`` the tasks in flight (default:
+            the cluster's CPUs).
+        vary: Varied parameters (drawn per trial from its seed).
+        compare: Run every seed once per value of this (paired), or None.
+        speed: Speed override in (0, 1].
+        control_rate_hz: IK rate [Hz].
+        backend: ``process`` or ``ray``.
+        address: Address of a running Ray cluster (``ray`` only; None: start a local one).
+    """
 
     scenario: str = "pick-place-random"
     controller: str = "qp"
     trials: int = 20
     first_seed: int = 0
-    workers: int = field(default_factory=available_cpus)
+    workers: int | None = None
+    vary: VaryPlan = field(default_factory=VaryPlan)
+    compare: Comparison | None = None
+    speed: float = 1.0
+    control_rate_hz: float = 100.0
+    backend: str = "process"
+    address: str | None = None
+
+    def specs(self) -> tuple[TrialSpec, ...]:
+        """One trial spec per arm (one without a comparison), in the order of the values."""
+        base = TrialSpec(
+            self.scenario, self.controller, self.speed, self.control_rate_hz, self.vary
+        )
+        if self.compare is None:
+            return (base,)
+        c = self.compare
+        return tuple(
+            TrialSpec(
+                self.scenario,
+                v if c.key == "controller" else self.controller,
+                self.speed,
+                self.control_rate_hz,
+                self.vary,
+                arm=f"{c.key}={v}",
+            )
+            for v in c.values
+        )
+
+    @property
+    def seeds(self) -> range:
+        """The trials' seeds."""
+        return range(self.first_seed, self.first_seed + self.trials)
+
+    @property
+    def runs(self) -> int:
+        """Runs the sweep makes: seeds × arms."""
+        return self.trials * len(self.specs())
+
+    def resolved_workers(self) -> int:
+        """The number of workers when none was given: one per available CPU (a Ray
+        cluster at an address: its CPUs, known once connected; this gives 0 then)."""
+        if self.workers is not None:
+            return self.workers
+        if self.backend == "ray" and self.address is not None:
+            return 0
+        return available_cpus()
 
     def validate(self) -> None:
         """Raise InvalidInputError / UnknownNameError for an invalid sweep."""
-        validate_request(RunRequest(self.scenario, self.controller, self.first_seed))
+        if self.backend not in BACKENDS:
+            raise InvalidInputError(
+                f"--backend must be one of {', '.join(BACKENDS)}, got '{self.backend}'"
+            )
+        if self.address is not None and self.backend != "ray":
+            raise InvalidInputError("--address needs --backend ray (the address of its cluster)")
+        if (
+            self.compare is not None
+            and self.compare.key == "controller"
+            and self.controller != "qp"
+        ):
+            raise InvalidInputError(
+                "--controller and --compare controller=... both set the controller; give one"
+            )
+        for spec in self.specs():
+            validate_request(spec.request(self.first_seed))
         if not 1 <= self.trials <= MAX_TRIALS:
             raise InvalidInputError(f"--trials must be in [1, {MAX_TRIALS}], got {self.trials}")
         if self.first_seed + self.trials - 1 > MAX_SEED:
             raise InvalidInputError(f"--seed + --trials - 1 must be <= {MAX_SEED}")
-        cpus = available_cpus()
-        if not 1 <= self.workers <= 4 * cpus:
-            raise InvalidInputError(
-                f"--workers must be in [1, {4 * cpus}] here ({cpus} CPUs available), "
-                f"got {self.workers}"
+        self._validate_control_rates()
+        if self.workers is not None:
+            remote = self.backend == "ray" and self.address is not None
+            cpus = available_cpus()
+            top = MAX_TRIALS if remote else 4 * cpus
+            if not 1 <= self.workers <= top:
+                where = "" if remote else f" here ({cpus} CPUs available)"
+                raise InvalidInputError(
+                    f"--workers must be in [1, {top}]{where}, got {self.workers}"
+                )
+        if self.backend == "ray":
+            from pickplace.sweep_ray import check_address, require_ray
+
+            require_ray()
+            if self.address is not None:
+                check_address(self.address)
+
+    def _validate_control_rates(self) -> None:
+        """Every control rate the trials use is a whole number of the scene's steps."""
+        rates = {self.control_rate_hz}
+        if "control_rate" in self.vary.names:
+            rates = set(self.vary.spec("control_rate").values)
+        if rates == {100.0}:
+            return  # the runner's default: valid for every usable timestep
+        timestep = float(compile_scene(DEFAULT_SCENE).opt.timestep)
+        for rate in sorted(rates):
+            resolve_control_rate(rate, timestep)
+
+
+# ---------------------------------------------------------------------- one trial
+
+
+def compact_summary(summary: dict[str, Any], arm: str = "") -> dict[str, Any]:
+    """The part of a run's summary a sweep keeps (:data:`TRIAL_KEYS`), plus ``failure_text``
+    (the failure event's text; for ``no-feasible-plan`` with the grip's problem when planning
+    stopped at one, else the first candidate's),
+    ``parameters`` (when varied) and ``arm`` (in a comparison). A non-finite number becomes
+    None (JSON has no NaN)."""
+    out = {k: _finite_or_none(summary.get(k)) for k in TRIAL_KEYS}
+    text = next((e["text"] for e in summary.get("events", ()) if e["kind"] == "failure"), None)
+    plan = summary.get("plan")
+    if summary.get("failure") == "no-feasible-plan" and plan and plan.get("candidates"):
+        # The grip problem when planning stopped at one (it holds for every pose), else the
+        # first candidate's.
+        problems = [c["problem"] for c in plan["candidates"] if c.get("problem")]
+        grip = [p for p in problems if p["kind"] == GRIP_PROBLEM]
+        if problems:
+            p, which = (grip[0], "grip") if grip else (problems[0], "first candidate")
+            text = (
+                f"{text}; {which}: {p['text']}"
+                if grip
+                else f"{text}; {which}: {p['kind']}: {p['text']}"
             )
+    out["failure_text"] = text
+    if "parameters" in summary:
+        out["parameters"] = summary["parameters"]
+    if arm:
+        out["arm"] = arm
+    return out
 
 
-def run_trial(scenario: str, controller: str, seed: int) -> dict[str, Any]:
-    """Run one trial and return its summary without the event list."""
-    summary = run(RunRequest(scenario=scenario, controller=controller, seed=seed)).summary()
-    summary.pop("events", None)
-    return summary
+def _finite_or_none(value: Any) -> Any:
+    """None for a non-finite float (e.g. σmin of a run that took no step): valid JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
-def lost_trial(seed: int, reason: str, detail: str | None = None) -> dict[str, Any]:
+def run_trial(spec: TrialSpec, seed: int) -> dict[str, Any]:
+    """Run one trial and return its compact summary (:func:`compact_summary`)."""
+    return compact_summary(run(spec.request(seed)).summary(), spec.arm)
+
+
+def lost_trial(seed: int, reason: str, detail: str | None = None, arm: str = "") -> dict[str, Any]:
     """The entry of a trial that gave no summary (``worker-died``, ``worker-error``)."""
     entry: dict[str, Any] = {"seed": seed, "success": False, "failure": reason, "lost": True}
     if detail:
         entry["detail"] = detail
+    if arm:
+        entry["arm"] = arm
     return entry
 
 
-def run_sweep(
-    req: SweepRequest, on_trial: Callable[[dict[str, Any]], None] | None = None
-) -> dict[str, Any]:
-    """Run every trial of ``req`` and return the report (JSON-serialisable).
+def guarded_trial(spec: TrialSpec, seed: int) -> dict[str, Any]:
+    """:func:`run_trial`, with an exception reported as a ``worker-error`` trial (never as a
+    traceback): what a worker runs."""
+    try:
+        return run_trial(spec, seed)
+    except Exception as exc:
+        return lost_trial(seed, WORKER_ERROR, f"{type(exc).__name__}: {exc}", spec.arm)
 
-    ``on_trial`` gets each trial's summary (or lost-trial entry) as it arrives. An interrupt
-    (KeyboardInterrupt) stops the sweep and returns the partial report.
+
+Job = tuple[int, int]
+"""(index of the trial spec, seed)."""
+
+Add = Callable[[dict[str, Any]], None]
+
+
+def jobs_of(req: SweepRequest) -> list[Job]:
+    """Every run of the sweep, seed by seed (all arms of a seed together)."""
+    n = len(req.specs())
+    return [(a, seed) for seed in req.seeds for a in range(n)]
+
+
+def run_sweep(req: SweepRequest, on_trial: Add | None = None) -> dict[str, Any]:
+    """Run every trial of ``req`` and return the report (JSON-serialisable, see
+    :func:`pickplace.sweep_report.sweep_report`).
+
+    ``on_trial`` gets each trial's compact summary (or lost-trial entry) as it arrives. An
+    interrupt (KeyboardInterrupt) stops the sweep and returns the partial report.
     """
     req.validate()
-    seeds = [req.first_seed + i for i in range(req.trials)]
+    specs = req.specs()
+    jobs = jobs_of(req)
     wall0 = time.perf_counter()
     results: list[dict[str, Any]] = []
+    workers = req.resolved_workers()
 
     def add(entry: dict[str, Any]) -> None:
         results.append(entry)
@@ -112,20 +415,71 @@ def run_sweep(
             on_trial(entry)
 
     interrupted = False
+    start_s = 0.0
     try:
-        if req.workers == 1:
-            for seed in seeds:
-                summary = run_trial(req.scenario, req.controller, seed)
+        if req.backend == "ray":
+            from pickplace.sweep_ray import run_ray
+
+            workers, start_s = run_ray(specs, jobs, add, req.address, req.workers)
+        elif workers == 1:
+            for a, seed in jobs:
+                summary = run_trial(specs[a], seed)
                 if summary["failure"] == "interrupted":  # a stop request, not a result
                     interrupted = True
                     break
                 add(summary)
         else:
-            _run_parallel(req, seeds, add)
+            _run_parallel(specs, jobs, workers, add)
     except KeyboardInterrupt:
         interrupted = True
     wall = time.perf_counter() - wall0
-    return sweep_report(req, results, wall, interrupted=interrupted)
+    return sweep_report(
+        req, results, wall, interrupted=interrupted, workers=workers, start_s=start_s
+    )
+
+
+def sweep_report(
+    req: SweepRequest,
+    results: Sequence[dict[str, Any]],
+    wall: float,
+    *,
+    interrupted: bool = False,
+    workers: int | None = None,
+    start_s: float = 0.0,
+) -> dict[str, Any]:
+    """Aggregate trial summaries (and lost-trial entries) into the sweep report
+    (:func:`pickplace.sweep_report.build_report`).
+
+    ``completed`` counts the runs that ended (a lost trial counts, as a failure);
+    ``success_rate`` is successes / completed; ``runs`` = seeds × arms were asked for.
+    ``start_s`` is the part of ``wall`` spent starting the backend (a Ray cluster) [s].
+    """
+    compare = req.compare
+    controlled = compare is not None and compare.key == "controller"
+    header = {
+        "scenario": req.scenario,
+        "controller": None if controlled else req.controller,
+        "trials": req.trials,
+        "runs": req.runs,
+        "interrupted": interrupted,
+        "first_seed": req.first_seed,
+        "backend": req.backend,
+        "workers": workers if workers is not None else req.resolved_workers(),
+        "speed": req.speed,
+        "control_rate_hz": req.control_rate_hz,
+        "vary": req.vary.as_dict(),
+        "vary_text": req.vary.describe(),
+        "compare_flag": None if compare is None else compare.flag(),
+    }
+    return build_report(
+        header,
+        req.specs(),
+        list(results),
+        req.vary,
+        wall,
+        None if compare is None else compare.as_dict(),
+        start_s,
+    )
 
 
 # ---------------------------------------------------------------------- worker processes
@@ -136,22 +490,19 @@ def _context() -> Any:
     return mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
 
 
-def _worker_main(conn: Connection, scenario: str, controller: str) -> None:
-    """A worker: seeds in, summaries out, until it gets None."""
+def _worker_main(conn: Connection, specs: Sequence[TrialSpec]) -> None:
+    """A worker: jobs in, summaries out, until it gets None."""
     ignore_in_child()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     while True:
         try:
-            seed = conn.recv()
+            job = conn.recv()
         except (EOFError, OSError):
             return
-        if seed is None:
+        if job is None:
             return
-        try:
-            result = run_trial(scenario, controller, seed)
-        except Exception as exc:  # reported as a failed trial, never as a traceback
-            result = lost_trial(seed, WORKER_ERROR, f"{type(exc).__name__}: {exc}")
-        conn.send(result)
+        arm, seed = job
+        conn.send(guarded_trial(specs[arm], seed))
 
 
 @contextlib.contextmanager
@@ -166,20 +517,18 @@ def _stop_signals_blocked() -> Iterator[None]:
 
 
 class _Worker:
-    def __init__(self, ctx: Any, req: SweepRequest, seed: int) -> None:
+    def __init__(self, ctx: Any, specs: Sequence[TrialSpec], job: Job) -> None:
         self.conn, child = ctx.Pipe()
         with _stop_signals_blocked():
-            self.process = ctx.Process(
-                target=_worker_main, args=(child, req.scenario, req.controller), daemon=True
-            )
+            self.process = ctx.Process(target=_worker_main, args=(child, specs), daemon=True)
             self.process.start()
         child.close()
-        self.seed: int | None = None
-        self.give(seed)
+        self.job: Job | None = None
+        self.give(job)
 
-    def give(self, seed: int | None) -> None:
-        self.seed = seed
-        self.conn.send(seed)
+    def give(self, job: Job | None) -> None:
+        self.job = job
+        self.conn.send(job)
 
     def kill(self) -> None:
         with contextlib.suppress(OSError, AttributeError):
@@ -188,19 +537,17 @@ class _Worker:
         self.conn.close()
 
 
-def _run_parallel(
-    req: SweepRequest, seeds: list[int], add: Callable[[dict[str, Any]], None]
-) -> None:
+def _run_parallel(specs: Sequence[TrialSpec], jobs: Sequence[Job], workers: int, add: Add) -> None:
     ctx = _context()
-    pending = deque(seeds)
-    workers: list[_Worker] = []
+    pending = deque(jobs)
+    running: list[_Worker] = []
     try:
-        while pending and len(workers) < req.workers:
-            workers.append(_Worker(ctx, req, pending.popleft()))
-        while workers:
-            waitables: list[Any] = [w.conn for w in workers] + [w.process.sentinel for w in workers]
+        while pending and len(running) < workers:
+            running.append(_Worker(ctx, specs, pending.popleft()))
+        while running:
+            waitables: list[Any] = [w.conn for w in running] + [w.process.sentinel for w in running]
             ready = set(wait(waitables, timeout=POLL_PERIOD_S))
-            for w in list(workers):
+            for w in list(running):
                 result = None
                 if w.conn in ready or w.process.sentinel in ready:
                     with contextlib.suppress(EOFError, OSError):
@@ -209,64 +556,43 @@ def _run_parallel(
                 if result is not None:
                     add(result)
                     w.give(pending.popleft() if pending else None)
-                    if w.seed is None:
+                    if w.job is None:
                         w.process.join(timeout=1.0)
                         w.conn.close()
-                        workers.remove(w)
+                        running.remove(w)
                 elif w.process.sentinel in ready:  # died with a trial in hand
                     code = w.process.exitcode
-                    if w.seed is not None:
+                    if w.job is not None:
+                        arm, seed = w.job
                         how = f"killed by signal {-code}" if code and code < 0 else f"exit {code}"
-                        add(lost_trial(w.seed, WORKER_DIED, how))
+                        add(lost_trial(seed, WORKER_DIED, how, specs[arm].arm))
                     w.kill()
-                    workers.remove(w)
+                    running.remove(w)
                     if pending:
-                        workers.append(_Worker(ctx, req, pending.popleft()))
+                        running.append(_Worker(ctx, specs, pending.popleft()))
     finally:
-        for w in workers:
+        for w in running:
             w.kill()
 
 
-# ---------------------------------------------------------------------- report
-
-
-def sweep_report(
-    req: SweepRequest, results: list[dict[str, Any]], wall: float, *, interrupted: bool = False
-) -> dict[str, Any]:
-    """Aggregate trial summaries (and lost-trial entries) into the sweep report.
-
-    ``completed`` counts the trials that ended (a lost trial counts, as a failure);
-    ``success_rate`` is successes / completed. Metrics come from the trials with a summary.
-    """
-    results = sorted(results, key=lambda r: r["seed"])
-    full = [r for r in results if not r.get("lost")]
-    ok = [r for r in full if r["success"]]
-    failed: dict[str, list[int]] = {}
-    for r in results:
-        if not r["success"]:
-            failed.setdefault(str(r["failure"]), []).append(int(r["seed"]))
-    errors = np.array([r["place_error_m"] for r in ok if r["place_error_m"] is not None])
-    return {
-        "scenario": req.scenario,
-        "controller": req.controller,
-        "trials": req.trials,
-        "completed": len(results),
-        "interrupted": interrupted,
-        "first_seed": req.first_seed,
-        "workers": req.workers,
-        "successes": len(ok),
-        "success_rate": len(ok) / len(results) if results else 0.0,
-        "failures_by_reason": {k: len(v) for k, v in sorted(failed.items())},
-        "failed_seeds": dict(sorted(failed.items())),
-        "place_error_p50_m": float(np.percentile(errors, 50)) if errors.size else None,
-        "place_error_p95_m": float(np.percentile(errors, 95)) if errors.size else None,
-        "min_singular_value": min((r["min_singular_value"] for r in full), default=None),
-        "max_joint_speed_ratio": max((r["max_joint_speed_ratio"] for r in full), default=None),
-        "max_slip_m": max(((r["max_slip_m"] or 0.0) for r in full), default=None),
-        "sim_time_s": float(sum(r["sim_time_s"] for r in full)),
-        "wall_time_s": wall,
-        "trials_per_second": len(results) / wall if wall > 0 and results else None,
-    }
-
-
-SWEEP_WALL_TIME_FIELDS = ("wall_time_s", "trials_per_second")
+__all__ = [
+    "BACKENDS",
+    "COMPARABLE",
+    "MAX_TRIALS",
+    "SWEEP_WALL_TIME_FIELDS",
+    "TRIAL_KEYS",
+    "WORKER_DIED",
+    "WORKER_ERROR",
+    "Comparison",
+    "SweepRequest",
+    "TrialSpec",
+    "available_cpus",
+    "compact_summary",
+    "guarded_trial",
+    "jobs_of",
+    "lost_trial",
+    "parse_compare",
+    "run_sweep",
+    "run_trial",
+    "sweep_report",
+]

@@ -19,7 +19,8 @@ Entity path                                Contents
                                            up to ``MAX_SHOWN_LABELS`` failures, else on hover)
 ``world/trials/pose_offsets``              when ``pose_noise`` is varied: an arrow per trial
                                            from the planned brick position to where it was
-                                           moved after planning, coloured by outcome
+                                           moved after planning (the offset the run applied,
+                                           kept inside the bin), coloured by outcome
 ``world/legend``                           one labelled point per outcome, "dropped (25)",
                                            beside the bin
 ``plots/success_by/<parameter>/...``       a bar chart per varied parameter (a 2D view, so
@@ -37,8 +38,14 @@ Entity path                                Contents
                                            the metrics, per-bin tables, then the report dict
 =========================================  ====================================================
 
+In a comparison (``--compare``: trials carry an ``arm``, e.g. ``controller=qp``) each arm's
+points are under ``world/trials/<arm>/<outcome>`` and its charts under
+``plots/<arm>/success_by/<parameter>`` (``=`` written ``-``: ``controller-qp``); the legend
+names the arm; the report adds the paired comparison.
+
 The embedded blueprint shows the bin from above (camera placed from the bin's geometry) over
-the charts on the left, the report on the right.
+the charts on the left, the report on the right. The file is encoded in memory, written beside
+its path and renamed onto it once it reads back complete (:class:`~pickplace.outfile.OutputFile`).
 """
 
 from __future__ import annotations
@@ -46,18 +53,22 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from pickplace.errors import InvalidInputError, RecordingError
+from pickplace.errors import InvalidInputError, OutputError, RecordingError
+from pickplace.outfile import OutputFile
 from pickplace.scene import BinGeometry, Scene, load_scene
-from pickplace.stats import RateInterval, percentiles, success_rate
+from pickplace.stats import RateInterval, success_rate
+from pickplace.sweep_report import METRICS, Metric, metric_summary, outcome_of
 from pickplace.vary import BinStat, ParameterDraw, VaryPlan, VarySpec, success_by_parameter
+
+if TYPE_CHECKING:
+    from pickplace.sweep import SweepRequest
 
 APPLICATION_ID = "pickplace"
 POINT_RADIUS = 0.005  # trial markers [m]
@@ -70,51 +81,19 @@ FAILURE_COLORS = {
     "not-in-target-bin": (0.12, 0.47, 0.71),
     "nan": (0.50, 0.50, 0.50),
     "interrupted": (0.10, 0.10, 0.10),
+    "no-feasible-plan": (0.62, 0.62, 0.85),
+    "collision": (0.95, 0.85, 0.10),
+    "worker-died": (0.30, 0.30, 0.30),
+    "worker-error": (0.40, 0.20, 0.40),
 }
 # Further reasons take these in order of first appearance.
 EXTRA_COLORS = [(0.89, 0.47, 0.76), (0.74, 0.74, 0.13), (0.09, 0.75, 0.81)]
 BIN_FLOOR_COLOR = (0.55, 0.42, 0.30, 0.35)
 BIN_WALL_COLOR = (0.35, 0.27, 0.20)
 RATE_COLOR = (0.17, 0.63, 0.17)
+ENCODE_TIMEOUT_S = 30.0  # bound on encoding what was logged (normally milliseconds) [s]
 # Trial labels are shown when at most this many failed trials are drawn (else on hover only).
 MAX_SHOWN_LABELS = 15
-
-
-@dataclass(frozen=True)
-class Metric:
-    """A per-trial summary value shown as p50 / p95 / worst in the report.
-
-    Attributes:
-        key: Summary key.
-        label: Name shown.
-        unit: Unit shown ("" for none).
-        scale: Factor from the summary's SI value to ``unit``.
-        successes_only: Only successful trials count (a failed run's place error is its
-            distance to the target, its cycle time where it stopped).
-        low_is_worse: The bad tail is the low one (σmin): show p5 and the minimum instead.
-    """
-
-    key: str
-    label: str
-    unit: str
-    scale: float = 1.0
-    successes_only: bool = False
-    low_is_worse: bool = False
-
-
-METRICS: tuple[Metric, ...] = (
-    Metric("place_error_m", "place error", "mm", 1000.0, successes_only=True),
-    Metric("max_slip_m", "slip in the gripper", "mm", 1000.0),
-    Metric("sim_time_s", "cycle time (simulated)", "s", successes_only=True),
-    Metric("min_singular_value", "smallest σ of the Jacobian", "", low_is_worse=True),
-    Metric("max_joint_speed_ratio", "joint speed / limit", ""),
-    Metric("max_position_error_m", "tool position error", "mm", 1000.0),
-)
-
-
-def outcome_of(trial: Mapping[str, Any]) -> str:
-    """``success`` or the trial's failure reason."""
-    return "success" if trial["success"] else str(trial.get("failure") or "failed")
 
 
 def outcome_colors(outcomes: Sequence[str]) -> dict[str, tuple[float, float, float]]:
@@ -184,6 +163,7 @@ def _log_trials(
     trials: Sequence[Mapping[str, Any]],
     draws: Mapping[int, ParameterDraw],
     colors: Mapping[str, tuple[float, float, float]],
+    base: str = "world/trials",
 ) -> None:
     by_outcome: dict[str, list[Mapping[str, Any]]] = {}
     for t in trials:
@@ -196,7 +176,7 @@ def _log_trials(
             for t in group
         ]
         rec.log(
-            f"world/trials/{rr.escape_entity_path_part(outcome)}",
+            f"{base}/{rr.escape_entity_path_part(outcome)}",
             rr.Points3D(
                 np.array([t["brick_start_xyz"] for t in group], dtype=np.float64),
                 radii=[POINT_RADIUS],
@@ -208,26 +188,37 @@ def _log_trials(
         )
     origins, vectors, arrow_colors = [], [], []
     for t in trials:
-        d = draws.get(int(t["seed"]))
-        offset = d.pose_offset_W if d is not None else None
+        offset = _pose_offset(t, draws.get(int(t["seed"])))
         if offset is not None and t.get("brick_start_xyz") is not None:
             origins.append(t["brick_start_xyz"])
             vectors.append(offset)
             arrow_colors.append(colors[outcome_of(t)])
     if origins:
         rec.log(
-            "world/trials/pose_offsets",
+            f"{base}/pose_offsets",
             rr.Arrows3D(origins=origins, vectors=vectors, colors=arrow_colors, radii=[0.001]),
             static=True,
         )
 
 
+def _pose_offset(trial: Mapping[str, Any], draw: ParameterDraw | None) -> np.ndarray | None:
+    """Where the brick was moved after planning: the offset the run applied (kept inside the
+    bin) when the trial records it, else the drawn one; None without pose noise."""
+    applied = (trial.get("parameters") or {}).get("pose_offset_applied_xy_m")
+    if applied is not None:
+        return np.array([applied[0], applied[1], 0.0])
+    return draw.pose_offset_W if draw is not None else None
+
+
 def _log_legend(
-    rec: rr.RecordingStream, bin_: BinGeometry, counts: Mapping[str, int], colors: Mapping[str, Any]
+    rec: rr.RecordingStream,
+    bin_: BinGeometry,
+    entries: Sequence[tuple[str, tuple[float, float, float]]],
 ) -> None:
-    """One labelled point per outcome in a column beside the bin (outside its +x wall)."""
+    """One labelled point per (label, colour) in a column beside the bin (outside its +x
+    wall)."""
     hx, hy = bin_.inner_half_extents
-    n = len(counts)
+    n = len(entries)
     step = 2.0 * hy / max(n, 1)
     p_B = np.array([[hx + 0.05, hy - (k + 0.5) * step, 0.0] for k in range(n)])
     R_WB = bin_.X_WB.rotation().as_matrix()
@@ -238,8 +229,8 @@ def _log_legend(
         rr.Points3D(
             p_W,
             radii=[1.5 * POINT_RADIUS],
-            colors=[colors[o] for o in counts],
-            labels=[f"{o} ({c})" for o, c in counts.items()],
+            colors=[c for _, c in entries],
+            labels=[label for label, _ in entries],
             show_labels=True,
         ),
         static=True,
@@ -285,9 +276,9 @@ def _filled_boxes(
     return mins, sizes, radii
 
 
-def _log_bins(rec: rr.RecordingStream, spec: VarySpec, stats: Sequence[BinStat]) -> None:
-    """A bar chart of the success rate per bin with 95 % Wilson whiskers and n per bar."""
-    base = f"plots/success_by/{spec.name}"
+def _log_bins(rec: rr.RecordingStream, spec: VarySpec, stats: Sequence[BinStat], base: str) -> None:
+    """A bar chart of the success rate per bin with 95 % Wilson whiskers and n per bar, at
+    entity path ``base``."""
     unit = spec.parameter.unit
     slots = _chart_slots(stats)
     y = CHART_HEIGHT / 100.0  # chart units per percent
@@ -426,44 +417,45 @@ def _fmt(value: float | None, scale: float) -> str:
     return f"{v:.3g}" if math.isfinite(v) else str(v)
 
 
-def report_markdown(
+def _outcome_markdown(
     trials: Sequence[Mapping[str, Any]],
-    report: Mapping[str, Any],
-    plan: VaryPlan | None = None,
-    by_parameter: Mapping[str, Sequence[BinStat]] | None = None,
-) -> str:
-    """The report as markdown: headline, failures with seeds, metrics, bins, then the dict."""
+    title: str,
+    plan: VaryPlan | None,
+    by_parameter: Mapping[str, Sequence[BinStat]] | None,
+    rerun: Mapping[str, str | None],
+    level: str = "#",
+) -> list[str]:
+    """Headline, failures with seeds and re-run commands, metrics, bins: markdown lines."""
     rate = success_rate([bool(t["success"]) for t in trials])
-    scenario = report.get("scenario", trials[0].get("scenario", "?"))
-    controller = report.get("controller", trials[0].get("controller", "?"))
     lines = [
-        f"# {scenario} / {controller}: {rate.successes} of {rate.trials} succeeded",
+        f"{level} {title}: {rate.successes} of {rate.trials} succeeded",
         "",
         f"**Success rate {100 * rate.rate:.1f} %** (95 % Wilson interval "
         f"{100 * rate.low:.1f}–{100 * rate.high:.1f} %).",
         "",
-        f"Varied: {plan.describe() if plan is not None else 'nothing varied but the seed'}.",
-        "",
     ]
-    failed: dict[str, list[int]] = {}
+    failed: dict[str, list[Mapping[str, Any]]] = {}
     for t in trials:
         if not t["success"]:
-            failed.setdefault(outcome_of(t), []).append(int(t["seed"]))
+            failed.setdefault(outcome_of(t), []).append(t)
+    sub = level + "#"
     if failed:
-        lines += ["## Failures", "", "| reason | trials | seeds |", "|---|---:|---|"]
-        for reason, seeds in sorted(failed.items(), key=lambda kv: -len(kv[1])):
-            shown = " ".join(map(str, sorted(seeds)[:20])) + (" …" if len(seeds) > 20 else "")
+        lines += [f"{sub} Failures", "", "| reason | trials | seeds |", "|---|---:|---|"]
+        for reason, group in sorted(failed.items(), key=lambda kv: -len(kv[1])):
+            seeds = sorted(int(t["seed"]) for t in group)
+            shown = " ".join(map(str, seeds[:20])) + (" …" if len(seeds) > 20 else "")
             lines.append(f"| {reason} | {len(seeds)} | {shown} |")
-        first = min(min(s) for s in failed.values())
-        vary = "" if plan is None else " " + " ".join(f"--vary {s.flag()}" for s in plan.specs)
-        lines += [
-            "",
-            f"Re-run one alone: `pickplace run --scenario {scenario} --controller {controller} "
-            f"--seed {first}{vary}`",
-            "",
-        ]
+        lines.append("")
+        for reason, group in sorted(failed.items(), key=lambda kv: -len(kv[1])):
+            first = min(group, key=lambda t: int(t["seed"]))
+            text = first.get("failure_text") or first.get("detail")
+            command = rerun.get(reason)
+            lines.append(f"- **{reason}**, seed {first['seed']}" + (f": {text}" if text else ""))
+            if command:
+                lines.append(f"  re-run it alone: `{command}`")
+        lines.append("")
     lines += [
-        "## Metrics",
+        f"{sub} Metrics",
         "",
         "| metric | trials | p50 | p95 ¹ | worst ¹ |",
         "|---|---:|---:|---:|---:|",
@@ -471,37 +463,110 @@ def report_markdown(
     for m in METRICS:
         if not any(m.key in t for t in trials):
             continue
-        used = [t for t in trials if t["success"]] if m.successes_only else list(trials)
-        sign = -1.0 if m.low_is_worse else 1.0
-        values = [t.get(m.key) for t in used]
-        p = percentiles(None if v is None else sign * v for v in values)
-        scale = sign * m.scale
+        p = metric_summary(trials, m)
+        tail, worst = ("p5", "min") if m.low_is_worse else ("p95", "max")
         name = f"{m.label} [{m.unit}]" if m.unit else m.label
         note = " (successes)" if m.successes_only else ""
         lines.append(
-            f"| {name}{note} | {p.count} | {_fmt(p.p50, scale)} | {_fmt(p.p95, scale)} | "
-            f"{_fmt(p.max, scale)} |"
+            f"| {name}{note} | {p['count']} | {_fmt(p['p50'], m.scale)} | "
+            f"{_fmt(p[tail], m.scale)} | {_fmt(p[worst], m.scale)} |"
         )
-    lines += ["", "¹ p95 and max; p5 and min where low is worse (σ).", ""]
+    lines += [
+        "",
+        "Over the trials that moved (not refused before any physics). ¹ p95 and max; p5 and "
+        "min where low is worse (σ).",
+        "",
+    ]
     for name, stats in (by_parameter or {}).items():
         unit = plan.spec(name).parameter.unit if plan is not None else ""
         lines += [
-            f"## Success rate by {name}" + (f" [{unit}]" if unit and unit != "-" else ""),
+            f"{sub} Success rate by {name}" + (f" [{unit}]" if unit and unit != "-" else ""),
             "",
             "| bin | trials | succeeded | rate | 95 % Wilson | failures |",
             "|---|---:|---:|---:|---|---|",
         ]
-        for s in stats:
-            if s.rate is None:
-                lines.append(f"| {s.label} | 0 | 0 | – | – | |")
+        for st in stats:
+            if st.rate is None:
+                lines.append(f"| {st.label} | 0 | 0 | – | – | |")
                 continue
-            fails = ", ".join(f"{k} {v}" for k, v in s.failures.items())
+            fails = ", ".join(f"{k} {v}" for k, v in st.failures.items())
             lines.append(
-                f"| {s.label} | {s.trials} | {s.successes} | {100 * s.rate.rate:.0f} % | "
-                f"{100 * s.rate.low:.0f}–{100 * s.rate.high:.0f} % | {fails} |"
+                f"| {st.label} | {st.trials} | {st.successes} | {100 * st.rate.rate:.0f} % | "
+                f"{100 * st.rate.low:.0f}–{100 * st.rate.high:.0f} % | {fails} |"
             )
         lines.append("")
-    lines += ["## Report", "", "```json", json.dumps(report, indent=2, default=str), "```", ""]
+    return lines
+
+
+def _rerun_commands(
+    report: Mapping[str, Any], trials: Sequence[Mapping[str, Any]], plan: VaryPlan | None
+) -> dict[str, str | None]:
+    """The report's re-run command per failure reason; without one (a report not made by
+    :func:`pickplace.sweep.sweep_report`), one built from the first failed trial."""
+    out: dict[str, str | None] = {}
+    for reason, f in (report.get("failures") or {}).items():
+        out[reason] = f.get("rerun")
+    vary = "" if plan is None else "".join(f" --vary {s.flag()}" for s in plan.specs)
+    for t in sorted(trials, key=lambda t: int(t["seed"])):
+        reason = outcome_of(t)
+        if t["success"] or reason in out:
+            continue
+        scenario = t.get("scenario") or report.get("scenario", "?")
+        controller = t.get("controller") or report.get("controller", "?")
+        out[reason] = (
+            f"pickplace run --scenario {scenario} --controller {controller} "
+            f"--seed {t['seed']}{vary}"
+        )
+    return out
+
+
+def report_markdown(
+    trials: Sequence[Mapping[str, Any]],
+    report: Mapping[str, Any],
+    plan: VaryPlan | None = None,
+    by_parameter: Mapping[str, Sequence[BinStat]] | None = None,
+) -> str:
+    """The report as markdown: headline, failures with seeds and the command that re-runs
+    each, metrics, bins (per arm and the paired comparison with ``--compare``), then the
+    report dict (without its per-trial list)."""
+    scenario = report.get("scenario", trials[0].get("scenario", "?"))
+    controller = report.get("controller") or trials[0].get("controller", "?")
+    varied = plan.describe() if plan is not None else "nothing varied but the seed"
+    compare = report.get("compare")
+    lines: list[str] = []
+    if compare is None:
+        lines += _outcome_markdown(
+            trials,
+            f"{scenario} / {controller}",
+            plan,
+            by_parameter,
+            _rerun_commands(report, trials, plan),
+        )
+        lines[4:4] = [f"Varied: {varied}.", ""]
+    else:
+        lines += [f"# {scenario}: {report.get('compare_flag')}", "", f"Varied: {varied}.", ""]
+        for p in compare.get("paired", []):
+            lines += [
+                f"**{p['a']} − {p['b']}: {100 * p['difference']:+.1f} points** on "
+                f"{p['pairs']} paired seeds (95 % interval {100 * p['low']:+.1f} to "
+                f"{100 * p['high']:+.1f}; {p['interval_method']}); only {p['a']} succeeded on "
+                f"{p['a_only']}, only {p['b']} on {p['b_only']}; McNemar exact p = "
+                f"{p['mcnemar_p']:.3g}.",
+                "",
+            ]
+        for label, arm in compare["arms"].items():
+            group = [t for t in trials if t.get("arm") == label]
+            if not group:
+                continue
+            bins = (
+                success_by_parameter(plan, [plan.draw(int(t["seed"])) for t in group], group)
+                if plan is not None and plan.specs
+                else {}
+            )
+            rerun = {k: f.get("rerun") for k, f in arm["failures"].items()}
+            lines += _outcome_markdown(group, label, plan, bins, rerun, level="##")
+    shown = {k: v for k, v in report.items() if k != "trial_results"}
+    lines += ["## Report", "", "```json", json.dumps(shown, indent=2, default=str), "```", ""]
     return "\n".join(lines)
 
 
@@ -516,8 +581,19 @@ def eye_above(bin_: BinGeometry) -> tuple[np.ndarray, np.ndarray]:
     return target + R_WB @ offset_B, target
 
 
+def _arm_part(arm: str) -> str:
+    """An arm's label as an entity path part: ``controller=qp`` → ``controller-qp``."""
+    return str(rr.escape_entity_path_part(arm.replace("=", "-")))
+
+
+def chart_path(name: str, arm: str = "") -> str:
+    """Entity path of the chart of parameter ``name`` (of one arm in a comparison, e.g.
+    ``plots/controller-qp/success_by/brick_mass``)."""
+    return f"plots/{_arm_part(arm)}/success_by/{name}" if arm else f"plots/success_by/{name}"
+
+
 def build_sweep_blueprint(
-    plan: VaryPlan | None = None, scene: Scene | None = None
+    plan: VaryPlan | None = None, scene: Scene | None = None, arms: Sequence[str] = ()
 ) -> rrb.Blueprint:
     """Bin 1 from above over one chart per varied parameter (left), the report (right).
 
@@ -525,6 +601,7 @@ def build_sweep_blueprint(
         plan: Varied parameters (one chart each).
         scene: Scene whose source bin the camera looks at; default
             :func:`~pickplace.scene.load_scene`.
+        arms: The arms of a comparison (one chart per arm and parameter).
     """
     scene = scene or load_scene()
     eye, target = eye_above(scene.source_bin)
@@ -536,10 +613,12 @@ def build_sweep_blueprint(
     (x_lo, x_hi), (y_lo, y_hi) = CHART_BOUNDS
     charts = [
         rrb.Spatial2DView(
-            name=f"Success rate by {spec.name} (whiskers: 95 % Wilson interval)",
-            origin=f"plots/success_by/{spec.name}",
+            name=(f"{arm}: " if arm else "")
+            + f"Success rate by {spec.name} (whiskers: 95 % Wilson interval)",
+            origin=chart_path(spec.name, arm),
             visual_bounds=rrb.VisualBounds2D(x_range=(x_lo, x_hi), y_range=(y_lo, y_hi)),
         )
+        for arm in (arms or ("",))
         for spec in (plan.specs if plan is not None else ())
     ]
     left: Any = bin_view
@@ -556,6 +635,16 @@ def build_sweep_blueprint(
     )
 
 
+def _arms_of(trials: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The arms of a comparison in order of first appearance ([] without one)."""
+    arms: list[str] = []
+    for t in trials:
+        arm = t.get("arm")
+        if arm and arm not in arms:
+            arms.append(str(arm))
+    return arms
+
+
 def log_sweep(
     rec: rr.RecordingStream,
     trials: Sequence[Mapping[str, Any]],
@@ -567,18 +656,21 @@ def log_sweep(
 ) -> dict[str, list[BinStat]]:
     """Log a sweep into an open recording stream (see the module docstring).
 
+    In a comparison (trials with an ``arm``) each arm's trials are drawn under
+    ``world/trials/<arm>/`` and its charts at ``plots/<arm>/success_by/<parameter>``.
+
     Args:
         rec: The stream.
         trials: Per-trial summaries (keys ``seed``, ``success``, ``failure``,
             ``brick_start_xyz`` and any of :data:`METRICS`).
         report: The sweep report (shown as JSON at the end of the text).
         plan: The varied parameters, if any.
-        draws: One draw per trial (matched by seed); needed when ``plan`` varies something.
+        draws: One draw per seed (matched by seed); needed when ``plan`` varies something.
         scene: Scene whose source bin is drawn; default :func:`~pickplace.scene.load_scene`.
         bins: Bins per uniform parameter (default: see :func:`pickplace.vary.success_by_bin`).
 
     Returns:
-        The success rate per bin of each varied parameter, as plotted.
+        The success rate per bin of each varied parameter, as plotted (over every trial).
 
     Raises:
         InvalidInputError: No trials, or a trial without a draw when parameters vary.
@@ -587,23 +679,115 @@ def log_sweep(
         raise InvalidInputError("a sweep recording needs at least one trial, got none")
     scene = scene or load_scene()
     by_seed = {d.seed: d for d in draws}
+    varied = plan is not None and bool(plan.specs)
     by_parameter = (
-        success_by_parameter(plan, draws, trials, bins) if plan is not None and plan.specs else {}
+        success_by_parameter(plan, draws, trials, bins) if plan is not None and varied else {}
     )
     colors = outcome_colors([outcome_of(t) for t in trials])
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     _log_bin(rec, scene.source_bin, scene.p_W_base)
-    _log_trials(rec, trials, by_seed, colors)
-    counts: dict[str, int] = {}
-    for t in trials:
-        counts[outcome_of(t)] = counts.get(outcome_of(t), 0) + 1
-    ordered = dict(sorted(counts.items(), key=lambda kv: (kv[0] != "success", -kv[1], kv[0])))
-    _log_legend(rec, scene.source_bin, ordered, colors)
-    for spec in plan.specs if plan is not None else ():
-        _log_bins(rec, spec, by_parameter[spec.name])
+    arms = _arms_of(trials)
+    legend: list[tuple[str, tuple[float, float, float]]] = []
+    for arm in arms or [""]:
+        group = [t for t in trials if t.get("arm", "") == arm] if arm else list(trials)
+        base = f"world/trials/{_arm_part(arm)}" if arm else "world/trials"
+        _log_trials(rec, group, by_seed, colors, base)
+        counts: dict[str, int] = {}
+        for t in group:
+            counts[outcome_of(t)] = counts.get(outcome_of(t), 0) + 1
+        ordered = sorted(counts.items(), key=lambda kv: (kv[0] != "success", -kv[1], kv[0]))
+        legend += [(f"{arm}: " * bool(arm) + f"{o} ({c})", colors[o]) for o, c in ordered]
+        if plan is not None and varied:
+            stats = by_parameter if not arm else success_by_parameter(plan, draws, group, bins)
+            for spec in plan.specs:
+                _log_bins(rec, spec, stats[spec.name], chart_path(spec.name, arm))
+    _log_legend(rec, scene.source_bin, legend)
     text = report_markdown(trials, report, plan, by_parameter)
     rec.log("report", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
     return by_parameter
+
+
+def _default_recording_id(trials: Sequence[Mapping[str, Any]], report: Mapping[str, Any]) -> str:
+    seeds = [int(t["seed"]) for t in trials]
+    scenario = report.get("scenario", trials[0].get("scenario", "sweep"))
+    what = report.get("compare_flag") or report.get("controller") or trials[0].get("controller")
+    return f"sweep/{scenario}/{what or ''}/seeds-{min(seeds)}-{max(seeds)}"
+
+
+def encode_sweep(
+    trials: Sequence[Mapping[str, Any]],
+    report: Mapping[str, Any],
+    plan: VaryPlan | None = None,
+    draws: Sequence[ParameterDraw] = (),
+    scene: Scene | None = None,
+    bins: int | None = None,
+    recording_id: str | None = None,
+) -> bytes:
+    """The sweep's ``.rrd`` bytes with its blueprint (see :func:`log_sweep`), encoded in
+    memory (a sweep recording is small: points, charts and text).
+
+    Raises:
+        RecordingError: The recording could not be encoded.
+        InvalidInputError: See :func:`log_sweep`.
+    """
+    if not trials:
+        raise InvalidInputError("a sweep recording needs at least one trial, got none")
+    scene = scene or load_scene()
+    rid = recording_id or _default_recording_id(trials, report)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid)
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    stream = rr.binary_stream(recording=rec)
+    arms = _arms_of(trials)
+    rec.set_sinks(stream, default_blueprint=build_sweep_blueprint(plan, scene, arms))
+    try:
+        log_sweep(rec, trials, report, plan, draws, scene, bins)
+        data = stream.read(flush=True, flush_timeout_sec=ENCODE_TIMEOUT_S)
+    except RuntimeError as exc:
+        raise RecordingError(f"the sweep recording could not be encoded: {exc}") from exc
+    finally:
+        rec.disconnect()
+    return bytes(data or b"")
+
+
+def _check_complete(path: Path) -> None:
+    """Raise OutputError unless the ``.rrd`` at ``path`` reads back with its report."""
+    from rerun.chunk import RrdReader
+
+    try:
+        entities = RrdReader(path).store().schema().entity_paths()
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise OutputError(
+            f"the sweep recording does not read back ({' '.join(str(exc).split())[:200]})"
+        ) from None
+    if "/report" not in entities:
+        raise OutputError("the sweep recording lacks its report")
+
+
+def commit_recording(output: OutputFile, data: bytes) -> Path:
+    """Write ``data`` to ``output``'s temporary file, check that it reads back complete and
+    put it in place (an older file at the path is replaced only then).
+
+    Raises:
+        OutputError: The file could not be written or is incomplete (the temporary file is
+            deleted, an older file at the path is unchanged).
+    """
+    temp = output.open()
+    try:
+        with open(temp, "wb") as f:
+            f.write(data)
+        _check_complete(temp)
+    except OSError as exc:
+        output.discard()
+        raise OutputError(
+            f"cannot write the sweep recording '{output.path}': {exc.strerror or exc}; "
+            "an older file there is unchanged"
+        ) from None
+    except OutputError as exc:
+        output.discard()
+        raise OutputError(f"cannot write the sweep recording '{output.path}': {exc}") from None
+    output.commit()
+    return output.path
 
 
 def write_sweep_recording(
@@ -616,44 +800,52 @@ def write_sweep_recording(
     bins: int | None = None,
     recording_id: str | None = None,
 ) -> Path:
-    """Write a sweep to an ``.rrd`` file with its blueprint (see :func:`log_sweep`).
+    """Write a sweep to an ``.rrd`` file with its blueprint (see :func:`log_sweep`): encoded
+    in memory, written beside ``path`` and renamed onto it once it reads back complete
+    (:class:`~pickplace.outfile.OutputFile`: one writer per path).
 
     Args:
         path: The ``.rrd`` file.
         trials: Per-trial summaries.
         report: The sweep report.
         plan: The varied parameters, if any.
-        draws: One draw per trial.
+        draws: One draw per seed.
         scene: Scene whose source bin is drawn.
         bins: Bins per uniform parameter.
-        recording_id: Default ``sweep/SCENARIO/CONTROLLER/seeds-FIRST-LAST``.
+        recording_id: Default ``sweep/SCENARIO/CONTROLLER/seeds-FIRST-LAST`` (the
+            ``--compare`` flag in place of the controller in a comparison).
 
     Raises:
-        RecordingError: The file cannot be written.
+        RecordingError: The recording could not be encoded or its folder does not exist.
+        OutputError: The file could not be written (another run writes it, disk full, ...).
         InvalidInputError: See :func:`log_sweep`.
     """
     path = Path(path)
+    if not path.parent.is_dir():
+        raise RecordingError(f"cannot open the recording sink (file '{path}'): no such folder")
+    data = encode_sweep(trials, report, plan, draws, scene, bins, recording_id)
+    return commit_recording(OutputFile(path), data)
+
+
+def record_sweep(output: OutputFile, req: SweepRequest, report: Mapping[str, Any]) -> Path:
+    """Write the recording of a finished sweep ``req`` to ``output`` (opened by the caller
+    before the sweep, so that a second writer of the path is refused at once).
+
+    Raises:
+        OutputError: Nothing finished, or the file could not be written or encoded.
+    """
+    trials = report["trial_results"]
     if not trials:
-        raise InvalidInputError("a sweep recording needs at least one trial, got none")
-    scene = scene or load_scene()
-    if recording_id is None:
-        seeds = [int(t["seed"]) for t in trials]
-        scenario = report.get("scenario", trials[0].get("scenario", "sweep"))
-        controller = report.get("controller", trials[0].get("controller", ""))
-        recording_id = f"sweep/{scenario}/{controller}/seeds-{min(seeds)}-{max(seeds)}"
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
-    rec.set_log_time_enabled(False)
-    rec.set_log_tick_enabled(False)
+        output.discard()
+        raise OutputError(f"no trial finished: nothing to record in '{output.path}'")
+    plan = req.vary
+    draws = [plan.draw(s) for s in sorted({int(t["seed"]) for t in trials})] if plan.specs else []
     try:
-        rec.set_sinks(rr.FileSink(str(path)), default_blueprint=build_sweep_blueprint(plan, scene))
-    except (RuntimeError, OSError, ValueError) as exc:
-        raise RecordingError(f"cannot open the recording sink (file '{path}'): {exc}") from exc
-    try:
-        log_sweep(rec, trials, report, plan, draws, scene, bins)
-    finally:
-        rec.flush()
-        rec.disconnect()
-    return path
+        data = encode_sweep(trials, report, plan, draws)
+    except RecordingError as exc:
+        output.discard()
+        raise OutputError(str(exc)) from None
+    return commit_recording(output, data)
 
 
 __all__ = [
@@ -661,9 +853,13 @@ __all__ = [
     "Metric",
     "bin_outline_W",
     "build_sweep_blueprint",
+    "chart_path",
+    "commit_recording",
+    "encode_sweep",
     "log_sweep",
     "outcome_colors",
     "outcome_of",
+    "record_sweep",
     "report_markdown",
     "write_sweep_recording",
 ]
