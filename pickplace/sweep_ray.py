@@ -1,7 +1,7 @@
 """Sweep trials as Ray tasks, on a running Ray cluster or on a local one started for the sweep.
 
 Ray is an optional extra (``pip install 'pickplace[ray]'``); :func:`require_ray` says how to
-get it. Each trial is one task of :func:`pickplace.sweep.guarded_trial` (one CPU, never
+get it. Each trial is one task of :func:`pickplace.trial.guarded_trial` (one CPU, never
 retried), so a trial gives the same summary as with the process backend: the run depends on
 its seed and parameters only. Every node of a cluster needs the same pickplace installed
 (``pip install 'pickplace[ray]'`` in the nodes' Python).
@@ -40,7 +40,7 @@ from typing import IO, Any
 
 from pickplace.errors import InvalidInputError
 from pickplace.signals import STOP_SIGNALS
-from pickplace.sweep import (
+from pickplace.trial import (
     POLL_PERIOD_S,
     WORKER_DIED,
     WORKER_ERROR,
