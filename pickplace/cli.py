@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from pickplace.errors import OutputError, PickPlaceError
+from pickplace.errors import InvalidInputError, OutputError, PickPlaceError
 from pickplace.robot import DEFAULT_ROBOT
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
@@ -107,13 +107,7 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
-def _default_workers() -> int:
-    from pickplace.sweep import available_cpus
-
-    return available_cpus()
-
-
-def _add_task_options(p: argparse.ArgumentParser) -> None:
+def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
     """The options that define a task, shared by ``run`` and ``plan``."""
     p.add_argument("--scene", type=Path, help=SCENE_HELP)
     p.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
@@ -127,6 +121,7 @@ def _add_task_options(p: argparse.ArgumentParser) -> None:
         default=1.0,
         help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
     )
+    _add_vary(p, vary_help)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -140,7 +135,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate one scenario")
-    _add_task_options(run)
+    _add_task_options(
+        run,
+        "the parameters are drawn from --seed exactly as a sweep draws them, so a "
+        "sweep trial's re-run command reproduces it; NAME=VALUE fixes a value",
+    )
     run.add_argument(
         "--record",
         type=_record_path,
@@ -161,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan = sub.add_parser(
         "plan", help="plan a scenario and pre-flight its candidates, without physics"
     )
-    _add_task_options(plan)
+    _add_task_options(plan, "drawn from --seed as in pickplace run")
     plan.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     sub.add_parser("scenarios", help="list the scenarios").add_argument(
@@ -177,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
         default="pick-place-random",
         help="scenario name (default: pick-place-random; see pickplace scenarios)",
     )
-    sweep.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
-    sweep.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
+    sweep.add_argument("--controller", default=None, help="qp (default), pinv or dls")
+    sweep.add_argument("--robot", default=None, help=ROBOT_HELP)
     sweep.add_argument(
         "--trials", type=_positive_int, default=20, help="number of trials (default: 20)"
     )
@@ -189,11 +188,64 @@ def build_parser() -> argparse.ArgumentParser:
         "--workers",
         type=_positive_int,
         default=None,
-        help="parallel processes (default: one per CPU this process may use); 1 runs the "
-        "trials in this process",
+        help="parallel processes (default: one per CPU this process may use; 1 runs the "
+        "trials in this process); with --backend ray the local cluster's CPUs, or the tasks in "
+        "flight on a cluster at --address (default: its CPUs)",
+    )
+    _add_vary(sweep, "drawn per trial from its seed, recorded per trial in the report")
+    sweep.add_argument(
+        "--compare",
+        metavar="KEY=A,B",
+        help="run every seed once per value, with the same parameters, and compare the success "
+        "rates paired by seed, e.g. controller=qp,dls",
+    )
+    sweep.add_argument(
+        "--speed",
+        type=_finite_float,
+        default=1.0,
+        help="speed override in (0, 1] for every trial (or --vary speed=...)",
+    )
+    sweep.add_argument(
+        "--control-rate",
+        type=_finite_float,
+        default=100.0,
+        help="IK rate [Hz] of every trial (default: 100; or --vary control_rate=a,b)",
+    )
+    sweep.add_argument(
+        "--backend",
+        choices=("process", "ray"),
+        default="process",
+        help="process (default): this machine's processes; ray: Ray tasks (pip install "
+        "'pickplace[ray]')",
+    )
+    sweep.add_argument(
+        "--address",
+        metavar="ADDR",
+        help="with --backend ray: a running cluster's address (HOST:PORT, auto or "
+        "ray://HOST:PORT); default: start a local cluster for the sweep",
+    )
+    sweep.add_argument(
+        "--record",
+        type=_record_path,
+        metavar="FILE.rrd",
+        help="write the sweep as a Rerun recording (start poses by outcome, success rate per "
+        "varied parameter, the report); it appears there complete when the sweep ends",
     )
     sweep.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     return parser
+
+
+def _add_vary(parser: argparse.ArgumentParser, how: str) -> None:
+    from pickplace.vary import valid_parameters
+
+    parser.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="NAME=LOW:HIGH|NAME=a,b,c",
+        help=f"vary a parameter, uniform in [LOW, HIGH] or over a grid; repeatable; {how}. "
+        f"Names: {valid_parameters()}",
+    )
 
 
 # The command-line option of each input a library error can name (InvalidInputError.field).
@@ -209,6 +261,7 @@ OPTION_OF_FIELD = {
     "control_rate_hz": "--control-rate",
     "pace": "--pace",
     "speed": "--speed",
+    "address": "--address",
 }
 
 
@@ -353,6 +406,15 @@ def _human_summary(s: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _draw(texts: Sequence[str], seed: int) -> Any:
+    """The parameters ``--vary`` draws for ``seed`` (None without ``--vary``)."""
+    if not texts:
+        return None
+    from pickplace.vary import parse_vary
+
+    return parse_vary(texts).draw(seed)
+
+
 def _task_request(args: argparse.Namespace, **more: Any) -> RunRequest:
     """The run request of :func:`_add_task_options`' options, with ``more`` fields."""
     from pickplace.runner import RunRequest
@@ -366,6 +428,7 @@ def _task_request(args: argparse.Namespace, **more: Any) -> RunRequest:
         scene_path=args.scene,
         robot=args.robot,
         speed=args.speed,
+        parameters=_draw(args.vary, args.seed),
         **more,
     )
 
@@ -470,27 +533,6 @@ def _cmd_scenarios(args: argparse.Namespace, stop: InterruptHandler) -> int:
     return EXIT_OK
 
 
-def _human_sweep(report: dict[str, Any]) -> str:
-    p50, p95 = report["place_error_p50_m"], report["place_error_p95_m"]
-    rate = report["trials_per_second"]
-    lines = [
-        f"{report['scenario']} / {report['robot']} / {report['controller']}: "
-        f"{report['successes']}/{report['completed']} succeeded ({report['success_rate']:.0%})"
-        + (f" of {report['trials']} requested" if report["completed"] < report["trials"] else "")
-        + (f", {rate:.2f} trials/s" if rate is not None else "")
-        + f" with {report['workers']} worker(s)"
-    ]
-    if report["interrupted"]:
-        lines.append("  interrupted: the trials not finished are left out")
-    if p50 is not None:
-        lines.append(f"  place error p50 {p50 * 1000:.2f} mm, p95 {p95 * 1000:.2f} mm")
-    if report["min_singular_value"] is not None:
-        lines.append(f"  min singular value {report['min_singular_value']:.4f}")
-    for reason, seeds in report["failed_seeds"].items():
-        lines.append(f"  {reason}: seeds {' '.join(map(str, seeds))}")
-    return "\n".join(lines)
-
-
 def robot_rows() -> list[dict[str, Any]]:
     """One row per bundled robot: name, arm joints, gripper, open width, squeeze, file."""
     from pickplace.robot import ROBOTS_DIR, bundled_robots, load_robot
@@ -529,33 +571,75 @@ def _cmd_robots(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.sweep import SweepRequest, run_sweep
+    from pickplace.outfile import OutputFile
+    from pickplace.runner import validate_record_path
+    from pickplace.sweep import SweepRequest, parse_compare, run_sweep
+    from pickplace.sweep_report import report_text
+    from pickplace.vary import parse_vary
 
-    workers = args.workers if args.workers is not None else _default_workers()
+    compare = parse_compare(args.compare) if args.compare else None
+    for key, given in (("controller", args.controller), ("robot", args.robot)):
+        if given is not None and compare is not None and compare.key == key:
+            raise InvalidInputError(
+                f"--{key} and --compare {key}=... both set the {key}; give one", field=key
+            )
     req = SweepRequest(
-        args.scenario, args.controller, args.trials, args.seed, workers, robot=args.robot
+        scenario=args.scenario,
+        controller=args.controller or "qp",
+        trials=args.trials,
+        first_seed=args.seed,
+        workers=args.workers,
+        vary=parse_vary(args.vary),
+        compare=compare,
+        speed=args.speed,
+        control_rate_hz=args.control_rate,
+        backend=args.backend,
+        address=args.address,
+        robot=args.robot or DEFAULT_ROBOT,
     )
     req.validate()
-    progress = None if args.json else _progress(float(args.trials), f"sweep {args.scenario}")
-    if progress is not None:
-        progress.start()
-
-    def advance(_: dict[str, Any]) -> None:
-        if progress is not None:
-            progress.advance(progress.tasks[0].id)
-
-    stop.arm()
+    output = None
+    if args.record is not None:
+        validate_record_path(args.record)
+        output = OutputFile(args.record)
+        output.open()  # one writer per path: refused now, not after the sweep
     try:
-        report = run_sweep(req, on_trial=advance)
-    finally:
-        stop.disarm()
+        progress = None if args.json else _progress(float(req.runs), f"sweep {args.scenario}")
         if progress is not None:
-            progress.stop()
-    _write_stdout(json.dumps(report) if args.json else _human_sweep(report))
+            progress.start()
+
+        def advance(_: dict[str, Any]) -> None:
+            if progress is not None:
+                progress.advance(progress.tasks[0].id)
+
+        stop.arm()
+        try:
+            report = run_sweep(req, on_trial=advance)
+        finally:
+            stop.disarm()
+            if progress is not None:
+                progress.stop()
+        record_error = None
+        if output is not None:
+            from pickplace.sweep_recording import record_sweep
+
+            try:
+                report["recording"] = str(record_sweep(output, req, report))
+            except OutputError as exc:
+                record_error = str(exc)
+                report["recording"] = None
+    finally:
+        if output is not None:
+            output.discard()  # nothing left to do after a commit
+    _write_stdout(json.dumps(report) if args.json else report_text(report))
+    if record_error is not None:
+        _print_error(record_error)
     if report["interrupted"]:
         _to_stderr(f"pickplace: stopped by {signal_name(stop.signum or 2)}")
         return stop.exit_code
-    return EXIT_OK if report["successes"] == report["trials"] else EXIT_FAILED
+    if record_error is not None:
+        return EXIT_OUTPUT
+    return EXIT_OK if report["successes"] == report["runs"] else EXIT_FAILED
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from pickplace.errors import SceneError
+from pickplace.errors import InvalidInputError, SceneError
 from pickplace.scene import Scene
 from pickplace.task import World
 
@@ -54,6 +54,34 @@ class BrickMoved:
         world.data.qpos[self.adr : self.adr + 3] += self.OFFSET_W
         mujoco.mj_forward(world.model, world.data)
         return "brick moved by 0.08 m along x after planning"
+
+
+class BrickShifted:
+    """After the plan was made, the brick lies ``offset_W`` away from where it was planned for.
+
+    A sweep's ``pose_noise`` (:mod:`pickplace.vary`) draws the offset; the plan still aims at
+    the planned pose, so the grasp meets the brick off-centre, or misses it.
+
+    Args:
+        scene: The scene.
+        offset_W: Displacement (dx, dy, dz) of the brick in world [m].
+    """
+
+    name = "brick-shifted"
+
+    def __init__(self, scene: Scene, offset_W: np.ndarray) -> None:
+        self.adr = scene.brick_qpos_adr
+        self.offset_W = np.array(offset_W, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(self.offset_W)):
+            raise InvalidInputError(f"brick offset must be finite [m], got {self.offset_W}")
+
+    def apply(self, world: World, tick: int) -> str | None:
+        if tick != 0:
+            return None
+        world.data.qpos[self.adr : self.adr + 3] += self.offset_W
+        mujoco.mj_forward(world.model, world.data)
+        dx, dy = (1000.0 * self.offset_W[:2]).tolist()
+        return f"brick moved by ({dx:.1f}, {dy:.1f}) mm in x, y after planning"
 
 
 class HeavyBrick:

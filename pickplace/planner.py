@@ -17,6 +17,11 @@ Every candidate's clearance via-point turns with the base swing (``via="swing"``
 :func:`pickplace.plan.plan_pick_place`). Measured on bin 1 (``planning-failures.md``): the
 180° twin rescues only wrist cases, the 90° grasp every wall case; the swing via-point every
 wrist case. If none is feasible the report says so, with each candidate's first problem.
+
+A brick that the grip cannot hold even at rest within the timing's slip budget (too heavy,
+too little friction or grip force: :class:`~pickplace.timing.GripTooWeakError`) is still
+planned, timed within the friction alone or else the robot's limits alone, with a warning on
+the candidate: the physics, not the planner, then shows whether it is held or dropped.
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from pickplace.kinematics import ArmKinematics
 from pickplace.plan import Plan, PlanConfig, for_gripper, plan_pick_place, swung_pose
 from pickplace.preflight import Preflight, PreflightConfig, PreflightResult
 from pickplace.scene import Scene
-from pickplace.timing import SegmentLimits, TimingConfig, retime
+from pickplace.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 
 # Clearance of the via-point above the higher bin wall: brick height hanging below the tool
 # (0.025 m half-height) plus 0.1 m of air [m].
@@ -54,20 +59,25 @@ class Candidate:
         label: How the candidate differs from the others, e.g. ``"across the length"``.
         plan: The plan.
         preflight: Its pre-flight result.
+        warning: What the timing could not honour (the slip budget of a brick too heavy for
+            the grip), or None.
     """
 
     label: str
     plan: Plan
     preflight: PreflightResult
+    warning: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON form: label, feasible, the first problem and how far the plan was checked."""
+        """JSON form: label, feasible, the first problem, how far the plan was checked and the
+        timing's warning."""
         p = self.preflight
         return {
             "label": self.label,
             "feasible": p.feasible,
             "problem": None if p.problem is None else p.problem.as_dict(),
             "checked_until_s": p.t_checked,
+            "warning": self.warning,
         }
 
 
@@ -190,8 +200,8 @@ class PickPlacePlanner:
         tried: list[Candidate] = []
         chosen: int | None = None
         for label, X_OG in self.grasps(X_WO_pick):
-            plan, result = self.timed_plan(X_WO_pick, X_WO_place, X_OG)
-            tried.append(Candidate(label, plan, result))
+            plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, X_OG)
+            tried.append(Candidate(label, plan, result, warning))
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
                 if first_feasible:
@@ -200,27 +210,50 @@ class PickPlacePlanner:
 
     def timed_plan(
         self, X_WO_pick: SE3, X_WO_place: SE3, X_OG: SE3
-    ) -> tuple[Plan, PreflightResult]:
+    ) -> tuple[Plan, PreflightResult, str | None]:
         """One candidate: the path swept by the pre-flight, then (if it passes) timed by the
         robot's limits and pre-flighted again as timed.
 
         Returns:
-            The timed plan and its pre-flight; or, when the path sweep fails, the swept plan
-            and the sweep's result (its first problem is on the path, whatever the timing).
+            The timed plan, its pre-flight and the timing's warning (None if the slip budget
+            held); or, when the path sweep fails, the swept plan, the sweep's result (its first
+            problem is on the path, whatever the timing) and None.
         """
         path = self.make_plan(X_WO_pick, X_WO_place, X_OG, self.sweep_config)
         swept = self.preflight.run(path, X_WO_pick, X_WO_place)
         if not swept.feasible:
-            return path, swept
+            return path, swept, None
+        timed, warning = self.retimed(path, swept.times, swept.q)
+        result = self.preflight.run(timed, X_WO_pick, X_WO_place)
+        return timed, result, warning
+
+    def retimed(self, path: Plan, times: np.ndarray, q: np.ndarray) -> tuple[Plan, str | None]:
+        """The swept path timed by the robot's limits and, while carrying, the slip budget.
+
+        A brick the budget cannot hold even at rest (too heavy, too little friction or grip:
+        :class:`~pickplace.timing.GripTooWeakError`) is still carried, so that the physics
+        shows what happens: first within the friction itself (no safety factor), and if even
+        that cannot hold it, within the robot's limits alone. The warning says which.
+        """
         timing = self.timing
 
-        def limits(carried: bool) -> SegmentLimits:
-            return timing.limits(
-                self.scene.v_max, self.scene.a_max, self.slip_accel if carried else None
-            )
+        def timed_within(slip: float | None) -> Plan:
+            def limits(carried: bool) -> SegmentLimits:
+                return timing.limits(self.scene.v_max, self.scene.a_max, slip if carried else None)
 
-        timed = retime(path, swept.times, swept.q, limits)
-        return timed, self.preflight.run(timed, X_WO_pick, X_WO_place)
+            return retime(path, times, q, limits)
+
+        try:
+            return timed_within(self.slip_accel), None
+        except GripTooWeakError as exc:
+            problem = str(exc)
+        try:
+            timed = timed_within(self.slip_accel * timing.slip_safety_factor)
+            how = "within the friction itself, without the slip safety factor"
+        except GripTooWeakError:
+            timed = timed_within(None)
+            how = "within the robot's limits alone: expect the brick to slip or drop"
+        return timed, f"{problem}; the plan is timed {how}"
 
     def make_plan(
         self,

@@ -39,6 +39,8 @@ from pickplace.scene import Scene, parse_scene
 from pickplace.sim import SimConfig, Simulation, TickObserver
 from pickplace.task import Task
 from pickplace.timing import TimingConfig
+from pickplace.variation import apply_to_scene, apply_to_task
+from pickplace.vary import ParameterDraw
 from pickplace.verdict import RunResult
 from pickplace.viewer import parse_viewer_url
 
@@ -75,6 +77,10 @@ class RunRequest:
         pace: Run at most this many times faster than real time (None: as fast as possible).
         speed: Speed override in (0, 1]: the planner scales every speed limit by it and every
             acceleration limit by its square.
+        parameters: Varied parameters drawn for this run's seed (:mod:`pickplace.vary`),
+            applied by :mod:`pickplace.variation`; a drawn ``speed`` or ``control_rate``
+            takes the place of :attr:`speed` or :attr:`control_rate_hz` (which must then be
+            left at their defaults). Recorded as the summary's ``parameters``.
     """
 
     scenario: str = "pick-place"
@@ -89,12 +95,26 @@ class RunRequest:
     control_rate_hz: float = 100.0
     pace: float | None = None
     speed: float = 1.0
+    parameters: ParameterDraw | None = None
     observers: Sequence[TickObserver] = field(default=(), compare=False)
 
     def recording_id(self, robot_name: str) -> str:
         """Recording id naming scenario, robot, controller and seed (a viewer merges the data
         of recordings with one id: runs that differ in any of these must not share one)."""
         return f"{self.scenario}/{robot_name}/{self.controller}/seed-{self.seed}"
+
+    @property
+    def run_speed(self) -> float:
+        """The speed override the run uses: the drawn ``speed``, else :attr:`speed`."""
+        drawn = self.parameters.get("speed") if self.parameters is not None else None
+        return self.speed if drawn is None else drawn
+
+    @property
+    def run_control_rate_hz(self) -> float:
+        """The control rate [Hz] asked for: the drawn ``control_rate``, else
+        :attr:`control_rate_hz`."""
+        drawn = self.parameters.get("control_rate") if self.parameters is not None else None
+        return self.control_rate_hz if drawn is None else drawn
 
 
 _FILE_KINDS = {
@@ -300,11 +320,33 @@ def validate_request(req: RunRequest) -> Scenario:
             f"{BRICK_YAW_LIMIT_RAD:.4f}] rad, got {req.brick.yaw:g}",
             field="brick",
         )
+    if req.parameters is not None:
+        _validate_parameters(req, req.parameters)
     if req.record is not None:
         validate_record_path(req.record)
     if req.connect is not None:
         parse_viewer_url(req.connect)
     return scenario
+
+
+def _validate_parameters(req: RunRequest, draw: ParameterDraw) -> None:
+    """The draw belongs to the run's seed, and sets speed or control rate only once."""
+    if not isinstance(draw, ParameterDraw):
+        raise InvalidInputError(f"parameters must be a ParameterDraw, got {type(draw).__name__}")
+    if draw.seed != req.seed:
+        raise InvalidInputError(
+            f"the varied parameters were drawn for seed {draw.seed}, the run has seed "
+            f"{req.seed}: draw them for the run's seed (VaryPlan.draw(seed))"
+        )
+    if "speed" in draw.values and req.speed != 1.0:
+        raise InvalidInputError(
+            "--speed and --vary speed both set the speed; give one of them", field="speed"
+        )
+    if "control_rate" in draw.values and req.control_rate_hz != 100.0:
+        raise InvalidInputError(
+            "--control-rate and --vary control_rate both set the control rate; give one of them",
+            field="control_rate_hz",
+        )
 
 
 def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, Task]:
@@ -334,8 +376,10 @@ def _scene_and_task(
     world = req.scene_path if req.scene_path is not None else DEFAULT_WORLD
     timestep = float(parse_scene(Path(world)).option.timestep)
     check_timestep(req.scene_path, timestep)
-    rate = resolve_control_rate(req.control_rate_hz, timestep)
+    rate = resolve_control_rate(req.run_control_rate_hz, timestep)
     scene = load_scene(req.scene_path, req.robot)
+    if req.parameters is not None:  # before planning: the planner must know the brick
+        scene = apply_to_scene(scene, req.parameters)
     if req.brick is not None:
         check_brick_in_source_bin(scene, req.brick)
     task = scenario.build(
@@ -345,9 +389,11 @@ def _scene_and_task(
             req.seed,
             req.brick,
             controller=req.controller,
-            timing=TimingConfig(speed=req.speed),
+            timing=TimingConfig(speed=req.run_speed),
         )
     )
+    if req.parameters is not None:  # after planning: what the plan must not know
+        task = apply_to_task(scene, task, req.parameters)
     planning = task.planning
     infeasible = planning is not None and not planning.feasible
     if refuse_infeasible and req.brick is not None and planning is not None and infeasible:

@@ -333,7 +333,11 @@ def _nominal(req: BuildRequest) -> Task:
 
 def _random(req: BuildRequest) -> Task:
     """A brick pose drawn from the seed, drawn again (same generator) until the planner finds
-    a feasible plan, so the scenario always has one; a given ``--brick`` is planned as is."""
+    a feasible plan, so the scenario always has one; a given ``--brick`` is planned as is.
+
+    A brick too heavy for the grip is planned all the same (with the timing's warning, see
+    :mod:`pickplace.planner`): whether it is held is the physics' to show.
+    """
     if req.brick is not None:
         return pick_place_task(req, req.brick)
     rng = np.random.default_rng(req.seed)

@@ -292,6 +292,8 @@ class Simulation:
             )
             return
         chosen = planning.candidates[planning.chosen]
+        if chosen.warning is not None:
+            self.emit("plan", chosen.warning, level="warn", tick=0)
         m = chosen.preflight
         self.emit(
             "plan",
@@ -545,6 +547,7 @@ class Simulation:
                 None if self.task.planning is None else self.task.planning.planning_time_s
             ),
             robot=self.scene.robot.name,
+            parameters=self.task.parameters,
         )
 
 

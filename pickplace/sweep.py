@@ -1,121 +1,284 @@
-"""Many trials of one scenario in parallel processes, summarised as one report.
+"""Many trials of one scenario, on this machine's processes or a Ray cluster, as one report.
 
-Trial ``i`` runs with seed ``first_seed + i``, so a failing trial can be re-run alone with
-``pickplace run --scenario NAME --seed SEED``. Results are ordered by seed and do not depend on
-the number of workers.
+Trial ``i`` runs with seed ``first_seed + i``. Its varied parameters (``--vary``,
+:mod:`pickplace.vary`) are drawn from that seed alone, so any trial re-runs alone with the
+command the report prints for it (``pickplace run --scenario NAME --seed SEED --vary ...``),
+whatever the order, the backend or the number of workers. With ``--compare KEY=A,B`` every
+seed runs once per value of KEY (e.g. ``controller=qp,dls``) with the same parameters: the
+runs are paired by seed (:mod:`pickplace.sweep_report` compares them).
 
-With more than one worker, each worker process runs one trial at a time and gets the next seed
-only when it returns a result, so nothing is queued in a worker:
+Backends (results are ordered by seed and do not depend on the backend):
 
-- A worker that dies (the OOM killer, a crash) fails its trial with reason ``worker-died``
-  (its seed is listed like any other failure); a new worker takes the next seed.
-- Ctrl-C, SIGTERM or SIGHUP (a KeyboardInterrupt in the calling thread) kills the workers at
-  once; the report covers the trials finished so far and says ``"interrupted": true``. Workers
-  ignore the terminal's Ctrl-C themselves: only this process decides.
+- ``process`` (default): with one worker the trials run in this process (an interrupt ends the
+  running trial, which is left out of the report). With more, each worker process runs one
+  trial at a time and gets the next one only when it returns a result, so nothing is queued in
+  a worker: a worker that dies (the OOM killer, a crash) fails its trial with reason
+  ``worker-died`` and a new worker takes the next trial; Ctrl-C, SIGTERM or SIGHUP (a
+  KeyboardInterrupt in the calling thread) kills the workers at once and the report covers
+  the trials finished so far, with ``"interrupted": true``. Workers ignore the terminal's
+  Ctrl-C themselves: only this process decides.
+- ``ray``: the trials are Ray tasks (:mod:`pickplace.sweep_ray`), on a running cluster
+  (``address``) or a local one started for the sweep; the same rules for dead workers and
+  interrupts.
 
-With one worker the trials run in this process; an interrupt ends the running trial, which is
-left out of the report.
+Each trial keeps only its compact summary (:func:`pickplace.trial.compact_summary`: no event
+list, no plan), so memory grows by under a kilobyte per trial.
 """
 
 from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
-import os
 import signal
 import sys
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-import numpy as np
-
-from pickplace.errors import InvalidInputError
+from pickplace.controllers import CONTROLLERS
+from pickplace.errors import InvalidInputError, UnknownNameError
 from pickplace.loader import load_scene
-from pickplace.robot import DEFAULT_ROBOT, resolve_description
-from pickplace.runner import MAX_SEED, RunRequest, run, validate_request
+from pickplace.robot import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
+from pickplace.runner import MAX_SEED, resolve_control_rate, validate_request
+from pickplace.scene import parse_scene
 from pickplace.signals import STOP_SIGNALS, ignore_in_child
+from pickplace.sweep_ray import check_address, require_ray, run_ray
+from pickplace.sweep_report import SWEEP_WALL_TIME_FIELDS, build_report
+from pickplace.trial import (
+    POLL_PERIOD_S,
+    TRIAL_KEYS,
+    WORKER_DIED,
+    WORKER_ERROR,
+    Add,
+    Job,
+    TrialSpec,
+    available_cpus,
+    compact_summary,
+    guarded_trial,
+    lost_trial,
+    run_trial,
+)
+from pickplace.vary import VaryPlan
 
 MAX_TRIALS = 100_000
-WORKER_DIED = "worker-died"
-WORKER_ERROR = "worker-error"
-POLL_PERIOD_S = 0.2  # the main loop wakes at least this often [s]
+BACKENDS = ("process", "ray")
+# What --compare can vary, each a field of TrialSpec.
+COMPARABLE = ("controller", "robot")
+# ---------------------------------------------------------------------- what a trial is
 
 
-def available_cpus() -> int:
-    """CPUs this process may run on (its affinity mask, e.g. under ``taskset``), else the
-    machine's count."""
-    try:
-        return len(os.sched_getaffinity(0)) or 1
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
+@dataclass(frozen=True)
+class Comparison:
+    """``--compare KEY=A,B``: every seed runs once per value of KEY.
+
+    Attributes:
+        key: What differs between the arms (one of :data:`COMPARABLE`).
+        values: Its values, at least two, all different, in the order given.
+    """
+
+    key: str
+    values: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        """Check the key, and that there are two or more distinct values."""
+        if self.key not in COMPARABLE:
+            raise InvalidInputError(
+                f"--compare {self.key}=...: can compare {', '.join(COMPARABLE)}, e.g. "
+                "--compare controller=qp,dls"
+            )
+        values = tuple(self.values)
+        if len(values) < 2 or len(set(values)) != len(values) or not all(values):
+            raise InvalidInputError(
+                f"--compare {self.key}= needs two or more different values, e.g. "
+                f"controller=qp,dls; got '{','.join(values)}'"
+            )
+        if self.key == "controller":
+            for v in values:
+                if v not in CONTROLLERS:
+                    raise UnknownNameError("controller", v, CONTROLLERS)
+        if self.key == "robot":
+            for v in values:
+                resolve_description(v)  # RobotError: unknown name or a bad robot.toml
+        object.__setattr__(self, "values", values)
+
+    def flag(self) -> str:
+        """The ``--compare`` value, e.g. ``controller=qp,dls``."""
+        return f"{self.key}={','.join(self.values)}"
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"key": self.key, "values": list(self.values)}
+
+
+def parse_compare(text: str) -> Comparison:
+    """Parse ``KEY=A,B[,C...]``.
+
+    Raises:
+        InvalidInputError: Bad syntax, a key that cannot be compared, fewer than two values.
+        UnknownNameError: An unknown controller.
+    """
+    key, sep, rest = text.partition("=")
+    if not sep or not key.strip() or not rest.strip():
+        raise InvalidInputError(
+            f"--compare '{text}' must be KEY=A,B with KEY one of {', '.join(COMPARABLE)}, "
+            "e.g. controller=qp,dls"
+        )
+    return Comparison(key.strip(), tuple(v.strip() for v in rest.split(",")))
 
 
 @dataclass(frozen=True)
 class SweepRequest:
-    """A sweep: ``trials`` runs of ``scenario`` with seeds ``first_seed …`` on ``workers``
-    processes (default: one per available CPU, see :func:`available_cpus`), with ``robot``
-    (a bundled name or a robot.toml)."""
+    """A sweep: ``trials`` seeds ``first_seed …`` of ``scenario``.
+
+    Attributes:
+        scenario: Scenario name.
+        controller: Controller name (not with ``compare`` on the controller).
+        trials: Number of seeds, in [1, :data:`MAX_TRIALS`].
+        first_seed: Seed of the first trial.
+        workers: Trials run at once: processes (default: one per available CPU, see
+            :func:`available_cpus`; 1 runs them in this process), or the local Ray
+            cluster's CPUs; on a Ray cluster at ``address`` the tasks in flight (default:
+            the cluster's CPUs).
+        vary: Varied parameters (drawn per trial from its seed).
+        compare: Run every seed once per value of this (paired), or None.
+        speed: Speed override in (0, 1].
+        control_rate_hz: IK rate [Hz].
+        backend: ``process`` or ``ray``.
+        address: Address of a running Ray cluster (``ray`` only; None: start a local one).
+        robot: A bundled robot's name or a ``robot.toml`` path (not with ``compare`` on the
+            robot).
+    """
 
     scenario: str = "pick-place-random"
     controller: str = "qp"
     trials: int = 20
     first_seed: int = 0
-    workers: int = field(default_factory=available_cpus)
+    workers: int | None = None
+    vary: VaryPlan = field(default_factory=VaryPlan)
+    compare: Comparison | None = None
+    speed: float = 1.0
+    control_rate_hz: float = 100.0
+    backend: str = "process"
+    address: str | None = None
     robot: str = DEFAULT_ROBOT
 
+    def specs(self) -> tuple[TrialSpec, ...]:
+        """One trial spec per arm (one without a comparison), in the order of the values."""
+        base = TrialSpec(
+            self.scenario, self.controller, self.speed, self.control_rate_hz, self.vary, self.robot
+        )
+        if self.compare is None:
+            return (base,)
+        c = self.compare
+        return tuple(
+            TrialSpec(
+                self.scenario,
+                v if c.key == "controller" else self.controller,
+                self.speed,
+                self.control_rate_hz,
+                self.vary,
+                v if c.key == "robot" else self.robot,
+                arm=f"{c.key}={v}",
+            )
+            for v in c.values
+        )
+
+    @property
+    def seeds(self) -> range:
+        """The trials' seeds."""
+        return range(self.first_seed, self.first_seed + self.trials)
+
+    @property
+    def runs(self) -> int:
+        """Runs the sweep makes: seeds × arms."""
+        return self.trials * len(self.specs())
+
+    def resolved_workers(self) -> int:
+        """The number of workers when none was given: one per available CPU (a Ray
+        cluster at an address: its CPUs, known once connected; this gives 0 then)."""
+        if self.workers is not None:
+            return self.workers
+        if self.backend == "ray" and self.address is not None:
+            return 0
+        return available_cpus()
+
     def validate(self) -> None:
-        """Raise InvalidInputError / UnknownNameError / RobotError for an invalid sweep."""
-        validate_request(RunRequest(self.scenario, self.controller, self.first_seed))
-        resolve_description(self.robot)
+        """Raise InvalidInputError / UnknownNameError for an invalid sweep."""
+        if self.backend not in BACKENDS:
+            raise InvalidInputError(
+                f"--backend must be one of {', '.join(BACKENDS)}, got '{self.backend}'"
+            )
+        if self.address is not None and self.backend != "ray":
+            raise InvalidInputError("--address needs --backend ray (the address of its cluster)")
+        if (
+            self.compare is not None
+            and self.compare.key == "controller"
+            and self.controller != "qp"
+        ):
+            raise InvalidInputError(
+                "--controller and --compare controller=... both set the controller; give one"
+            )
+        if self.compare is not None and self.compare.key == "robot" and self.robot != DEFAULT_ROBOT:
+            raise InvalidInputError(
+                "--robot and --compare robot=... both set the robot; give one", field="robot"
+            )
+        for spec in self.specs():
+            resolve_description(spec.robot)
+        for spec in self.specs():
+            validate_request(spec.request(self.first_seed))
         if not 1 <= self.trials <= MAX_TRIALS:
             raise InvalidInputError(f"--trials must be in [1, {MAX_TRIALS}], got {self.trials}")
         if self.first_seed + self.trials - 1 > MAX_SEED:
             raise InvalidInputError(f"--seed + --trials - 1 must be <= {MAX_SEED}")
-        cpus = available_cpus()
-        if not 1 <= self.workers <= 4 * cpus:
-            raise InvalidInputError(
-                f"--workers must be in [1, {4 * cpus}] here ({cpus} CPUs available), "
-                f"got {self.workers}"
-            )
+        self._validate_control_rates()
+        if self.workers is not None:
+            remote = self.backend == "ray" and self.address is not None
+            cpus = available_cpus()
+            top = MAX_TRIALS if remote else 4 * cpus
+            if not 1 <= self.workers <= top:
+                where = "" if remote else f" here ({cpus} CPUs available)"
+                raise InvalidInputError(
+                    f"--workers must be in [1, {top}]{where}, got {self.workers}"
+                )
+        if self.backend == "ray":
+            require_ray()
+            if self.address is not None:
+                check_address(self.address)
+
+    def _validate_control_rates(self) -> None:
+        """Every control rate the trials use is a whole number of the scene's steps."""
+        rates = {self.control_rate_hz}
+        if "control_rate" in self.vary.names:
+            rates = set(self.vary.spec("control_rate").values)
+        if rates == {100.0}:
+            return  # the runner's default: valid for every usable timestep
+        timestep = float(parse_scene(DEFAULT_WORLD).option.timestep)
+        for rate in sorted(rates):
+            resolve_control_rate(rate, timestep)
 
 
-def run_trial(
-    scenario: str, controller: str, seed: int, robot: str = DEFAULT_ROBOT
-) -> dict[str, Any]:
-    """Run one trial and return its summary without the event list."""
-    req = RunRequest(scenario=scenario, controller=controller, seed=seed, robot=robot)
-    summary = run(req).summary()
-    summary.pop("events", None)
-    return summary
+def jobs_of(req: SweepRequest) -> list[Job]:
+    """Every run of the sweep, seed by seed (all arms of a seed together)."""
+    n = len(req.specs())
+    return [(a, seed) for seed in req.seeds for a in range(n)]
 
 
-def lost_trial(seed: int, reason: str, detail: str | None = None) -> dict[str, Any]:
-    """The entry of a trial that gave no summary (``worker-died``, ``worker-error``)."""
-    entry: dict[str, Any] = {"seed": seed, "success": False, "failure": reason, "lost": True}
-    if detail:
-        entry["detail"] = detail
-    return entry
+def run_sweep(req: SweepRequest, on_trial: Add | None = None) -> dict[str, Any]:
+    """Run every trial of ``req`` and return the report (JSON-serialisable, see
+    :func:`pickplace.sweep_report.sweep_report`).
 
-
-def run_sweep(
-    req: SweepRequest, on_trial: Callable[[dict[str, Any]], None] | None = None
-) -> dict[str, Any]:
-    """Run every trial of ``req`` and return the report (JSON-serialisable).
-
-    ``on_trial`` gets each trial's summary (or lost-trial entry) as it arrives. An interrupt
-    (KeyboardInterrupt) stops the sweep and returns the partial report.
+    ``on_trial`` gets each trial's compact summary (or lost-trial entry) as it arrives. An
+    interrupt (KeyboardInterrupt) stops the sweep and returns the partial report.
     """
     req.validate()
-    seeds = [req.first_seed + i for i in range(req.trials)]
+    specs = req.specs()
+    jobs = jobs_of(req)
     wall0 = time.perf_counter()
-    # Composed and calibrated once, here: forked workers inherit the cached scene (and a bad
-    # robot file is refused before any trial).
-    load_scene(robot=req.robot)
     results: list[dict[str, Any]] = []
+    workers = req.resolved_workers()
 
     def add(entry: dict[str, Any]) -> None:
         results.append(entry)
@@ -123,20 +286,80 @@ def run_sweep(
             on_trial(entry)
 
     interrupted = False
+    start_s = 0.0
     try:
-        if req.workers == 1:
-            for seed in seeds:
-                summary = run_trial(req.scenario, req.controller, seed, req.robot)
+        # Composed and calibrated once, here: forked workers inherit the cached scenes (and a
+        # bad robot file is refused before any trial).
+        for robot in dict.fromkeys(spec.robot for spec in specs):
+            load_scene(robot=robot)
+        if req.backend == "ray":
+            workers, start_s = run_ray(specs, jobs, add, req.address, req.workers)
+        elif workers == 1:
+            for a, seed in jobs:
+                summary = run_trial(specs[a], seed)
                 if summary["failure"] == "interrupted":  # a stop request, not a result
                     interrupted = True
                     break
                 add(summary)
         else:
-            _run_parallel(req, seeds, add)
+            _run_parallel(specs, jobs, workers, add)
     except KeyboardInterrupt:
         interrupted = True
     wall = time.perf_counter() - wall0
-    return sweep_report(req, results, wall, interrupted=interrupted)
+    return sweep_report(
+        req, results, wall, interrupted=interrupted, workers=workers, start_s=start_s
+    )
+
+
+def sweep_report(
+    req: SweepRequest,
+    results: Sequence[dict[str, Any]],
+    wall: float,
+    *,
+    interrupted: bool = False,
+    workers: int | None = None,
+    start_s: float = 0.0,
+) -> dict[str, Any]:
+    """Aggregate trial summaries (and lost-trial entries) into the sweep report
+    (:func:`pickplace.sweep_report.build_report`).
+
+    ``completed`` counts the runs that ended (a lost trial counts, as a failure);
+    ``success_rate`` is successes / completed; ``runs`` = seeds × arms were asked for.
+    ``start_s`` is the part of ``wall`` spent starting the backend (a Ray cluster) [s].
+    """
+    compare = req.compare
+    controlled = compare is not None and compare.key == "controller"
+    robots = compare is not None and compare.key == "robot"
+    header = {
+        "scenario": req.scenario,
+        "robot": None if robots else _robot_name(req.robot, results),
+        "controller": None if controlled else req.controller,
+        "trials": req.trials,
+        "runs": req.runs,
+        "interrupted": interrupted,
+        "first_seed": req.first_seed,
+        "backend": req.backend,
+        "workers": workers if workers is not None else req.resolved_workers(),
+        "speed": req.speed,
+        "control_rate_hz": req.control_rate_hz,
+        "vary": req.vary.as_dict(),
+        "vary_text": req.vary.describe(),
+        "compare_flag": None if compare is None else compare.flag(),
+    }
+    return build_report(
+        header,
+        req.specs(),
+        list(results),
+        req.vary,
+        wall,
+        None if compare is None else compare.as_dict(),
+        start_s,
+    )
+
+
+def _robot_name(robot: str, results: Sequence[dict[str, Any]]) -> str:
+    """The robot's name as runs report it (a robot.toml path gives the name it holds)."""
+    return next((str(r["robot"]) for r in results if r.get("robot")), robot)
 
 
 # ---------------------------------------------------------------------- worker processes
@@ -147,22 +370,19 @@ def _context() -> Any:
     return mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
 
 
-def _worker_main(conn: Connection, scenario: str, controller: str, robot: str) -> None:
-    """A worker: seeds in, summaries out, until it gets None."""
+def _worker_main(conn: Connection, specs: Sequence[TrialSpec]) -> None:
+    """A worker: jobs in, summaries out, until it gets None."""
     ignore_in_child()
     signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     while True:
         try:
-            seed = conn.recv()
+            job = conn.recv()
         except (EOFError, OSError):
             return
-        if seed is None:
+        if job is None:
             return
-        try:
-            result = run_trial(scenario, controller, seed, robot)
-        except Exception as exc:  # reported as a failed trial, never as a traceback
-            result = lost_trial(seed, WORKER_ERROR, f"{type(exc).__name__}: {exc}")
-        conn.send(result)
+        arm, seed = job
+        conn.send(guarded_trial(specs[arm], seed))
 
 
 @contextlib.contextmanager
@@ -177,25 +397,18 @@ def _stop_signals_blocked() -> Iterator[None]:
 
 
 class _Worker:
-    def __init__(self, ctx: Any, req: SweepRequest, seed: int) -> None:
+    def __init__(self, ctx: Any, specs: Sequence[TrialSpec], job: Job) -> None:
         self.conn, child = ctx.Pipe()
         with _stop_signals_blocked():
-            self.process = ctx.Process(
-                target=_worker_main,
-                args=(child, req.scenario, req.controller, req.robot),
-                daemon=True,
-            )
+            self.process = ctx.Process(target=_worker_main, args=(child, specs), daemon=True)
             self.process.start()
         child.close()
-        self.seed: int | None = None
-        self.give(seed)
+        self.job: Job | None = None
+        self.give(job)
 
-    def give(self, seed: int | None) -> None:
-        """Hand the worker its next seed (None: stop). A worker that died meanwhile cannot
-        take it; its sentinel reports it, and the seed counts as its lost trial."""
-        self.seed = seed
-        with contextlib.suppress(BrokenPipeError, OSError):
-            self.conn.send(seed)
+    def give(self, job: Job | None) -> None:
+        self.job = job
+        self.conn.send(job)
 
     def kill(self) -> None:
         with contextlib.suppress(OSError, AttributeError):
@@ -204,19 +417,17 @@ class _Worker:
         self.conn.close()
 
 
-def _run_parallel(
-    req: SweepRequest, seeds: list[int], add: Callable[[dict[str, Any]], None]
-) -> None:
+def _run_parallel(specs: Sequence[TrialSpec], jobs: Sequence[Job], workers: int, add: Add) -> None:
     ctx = _context()
-    pending = deque(seeds)
-    workers: list[_Worker] = []
+    pending = deque(jobs)
+    running: list[_Worker] = []
     try:
-        while pending and len(workers) < req.workers:
-            workers.append(_Worker(ctx, req, pending.popleft()))
-        while workers:
-            waitables: list[Any] = [w.conn for w in workers] + [w.process.sentinel for w in workers]
+        while pending and len(running) < workers:
+            running.append(_Worker(ctx, specs, pending.popleft()))
+        while running:
+            waitables: list[Any] = [w.conn for w in running] + [w.process.sentinel for w in running]
             ready = set(wait(waitables, timeout=POLL_PERIOD_S))
-            for w in list(workers):
+            for w in list(running):
                 result = None
                 if w.conn in ready or w.process.sentinel in ready:
                     with contextlib.suppress(EOFError, OSError):
@@ -225,65 +436,43 @@ def _run_parallel(
                 if result is not None:
                     add(result)
                     w.give(pending.popleft() if pending else None)
-                    if w.seed is None:
+                    if w.job is None:
                         w.process.join(timeout=1.0)
                         w.conn.close()
-                        workers.remove(w)
+                        running.remove(w)
                 elif w.process.sentinel in ready:  # died with a trial in hand
                     code = w.process.exitcode
-                    if w.seed is not None:
+                    if w.job is not None:
+                        arm, seed = w.job
                         how = f"killed by signal {-code}" if code and code < 0 else f"exit {code}"
-                        add(lost_trial(w.seed, WORKER_DIED, how))
+                        add(lost_trial(seed, WORKER_DIED, how, specs[arm].arm))
                     w.kill()
-                    workers.remove(w)
+                    running.remove(w)
                     if pending:
-                        workers.append(_Worker(ctx, req, pending.popleft()))
+                        running.append(_Worker(ctx, specs, pending.popleft()))
     finally:
-        for w in workers:
+        for w in running:
             w.kill()
 
 
-# ---------------------------------------------------------------------- report
-
-
-def sweep_report(
-    req: SweepRequest, results: list[dict[str, Any]], wall: float, *, interrupted: bool = False
-) -> dict[str, Any]:
-    """Aggregate trial summaries (and lost-trial entries) into the sweep report.
-
-    ``completed`` counts the trials that ended (a lost trial counts, as a failure);
-    ``success_rate`` is successes / completed. Metrics come from the trials with a summary.
-    """
-    results = sorted(results, key=lambda r: r["seed"])
-    full = [r for r in results if not r.get("lost")]
-    ok = [r for r in full if r["success"]]
-    failed: dict[str, list[int]] = {}
-    for r in results:
-        if not r["success"]:
-            failed.setdefault(str(r["failure"]), []).append(int(r["seed"]))
-    errors = np.array([r["place_error_m"] for r in ok if r["place_error_m"] is not None])
-    return {
-        "scenario": req.scenario,
-        "robot": next((r["robot"] for r in full), req.robot),
-        "controller": req.controller,
-        "trials": req.trials,
-        "completed": len(results),
-        "interrupted": interrupted,
-        "first_seed": req.first_seed,
-        "workers": req.workers,
-        "successes": len(ok),
-        "success_rate": len(ok) / len(results) if results else 0.0,
-        "failures_by_reason": {k: len(v) for k, v in sorted(failed.items())},
-        "failed_seeds": dict(sorted(failed.items())),
-        "place_error_p50_m": float(np.percentile(errors, 50)) if errors.size else None,
-        "place_error_p95_m": float(np.percentile(errors, 95)) if errors.size else None,
-        "min_singular_value": min((r["min_singular_value"] for r in full), default=None),
-        "max_joint_speed_ratio": max((r["max_joint_speed_ratio"] for r in full), default=None),
-        "max_slip_m": max(((r["max_slip_m"] or 0.0) for r in full), default=None),
-        "sim_time_s": float(sum(r["sim_time_s"] for r in full)),
-        "wall_time_s": wall,
-        "trials_per_second": len(results) / wall if wall > 0 and results else None,
-    }
-
-
-SWEEP_WALL_TIME_FIELDS = ("wall_time_s", "trials_per_second")
+__all__ = [
+    "BACKENDS",
+    "COMPARABLE",
+    "MAX_TRIALS",
+    "SWEEP_WALL_TIME_FIELDS",
+    "TRIAL_KEYS",
+    "WORKER_DIED",
+    "WORKER_ERROR",
+    "Comparison",
+    "SweepRequest",
+    "TrialSpec",
+    "available_cpus",
+    "compact_summary",
+    "guarded_trial",
+    "jobs_of",
+    "lost_trial",
+    "parse_compare",
+    "run_sweep",
+    "run_trial",
+    "sweep_report",
+]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import mujoco
 from mink.lie import SE3
@@ -68,6 +68,9 @@ class Task:
         planning: The candidates the planner pre-flighted and the one chosen (``plan`` is
             that one); None for a plan executed without a pre-flight. When no candidate is
             feasible the run ends before any physics (failure ``no-feasible-plan``).
+        parameters: The varied parameters the task was built with (JSON form, see
+            :mod:`pickplace.variation`), reported in the run's summary; None when nothing
+            was varied.
     """
 
     scenario: str
@@ -77,6 +80,7 @@ class Task:
     X_WO_start: SE3
     faults: Sequence[Fault] = ()
     planning: PlanningReport | None = None
+    parameters: dict[str, Any] | None = None
 
     @property
     def trajectory(self) -> PoseTrajectory:

@@ -43,6 +43,11 @@ GRAVITY_W = np.array([0.0, 0.0, -9.81])
 _TINY = 1e-12
 
 
+class GripTooWeakError(PlanError):
+    """The pads' friction cannot hold the carried brick even at rest, within the slip budget:
+    no timing of any path can carry it (it does not depend on the brick's pose or the grasp)."""
+
+
 @dataclass(frozen=True)
 class SegmentLimits:
     """Limits of one motion segment, in the units of the path.
@@ -172,6 +177,32 @@ class Profile:
         )
 
 
+def slip_box(slip_accel: float) -> np.ndarray:
+    """Half-sizes (3,) [m/s²] of the per-axis box on a − g that stays inside the ball
+    ``|a − g| ≤ slip_accel`` the pads' friction holds, and contains a = 0 (at rest).
+
+    The cube of half-size ``slip_accel / √3`` when that holds gravity; otherwise the axis of
+    gravity gets the larger half-size (``slip_accel`` + |g|) / 2, so the brick may still be
+    held at rest and accelerate up and down a little, and the other axes what is left of the
+    ball: √((slip_accel² − v²) / 2).
+
+    Raises:
+        GripTooWeakError: ``slip_accel`` ≤ |g|: the friction cannot hold the brick even at rest.
+    """
+    g_abs = float(np.linalg.norm(GRAVITY_W))
+    if slip_accel <= g_abs:
+        raise GripTooWeakError(
+            f"the carried brick would slip even at rest: the slip budget (the pads' friction "
+            f"over the safety factor) holds {slip_accel:.2f} m/s² against gravity's "
+            f"{g_abs:.2f} m/s²; the brick is too heavy for the grip"
+        )
+    axis = int(np.argmax(np.abs(GRAVITY_W)))
+    v = max(slip_accel / math.sqrt(3.0), 0.5 * (slip_accel + g_abs))
+    half = np.full(3, math.sqrt(max(slip_accel**2 - v**2, 0.0) / 2.0))
+    half[axis] = v
+    return half
+
+
 def time_optimal_profile(
     q: npt.ArrayLike,
     s: npt.ArrayLike,
@@ -208,8 +239,8 @@ def time_optimal_profile(
             speed = np.linalg.norm(dr, axis=1)
             x_max = np.minimum(x_max, (limits.tool_angular_speed / speed) ** 2)
     # Acceleration limits as rows c w + d x ≤ e (K, m): each joint both ways; the tool's
-    # linear and angular acceleration and the carried brick's a − g per axis, within
-    # limit / √3 (a box inside the limit's ball).
+    # linear and angular acceleration per axis, within limit / √3 (a cube inside the limit's
+    # ball), and the carried brick's a − g within a box inside its ball (see slip_box).
     cs, ds, es = [dq, -dq], [ddq, -ddq], [np.broadcast_to(a_max, dq.shape)] * 2
     root3 = math.sqrt(3.0)
     if limits.tool_accel is not None:
@@ -223,17 +254,11 @@ def time_optimal_profile(
         ds += [ddr, -ddr]
         es += [bound, bound]
     if limits.slip_accel is not None:
-        budget = limits.slip_accel / root3
-        if budget < float(np.max(np.abs(GRAVITY_W))):
-            raise PlanError(
-                f"the carried brick would slip even at rest (its grip holds "
-                f"{limits.slip_accel:.2f} m/s² against gravity's 9.81): it is too heavy for "
-                "the grip"
-            )
         g = np.broadcast_to(GRAVITY_W, dp.shape)
         cs += [dp, -dp]
         ds += [ddp, -ddp]
-        es += [budget + g, budget - g]
+        half = slip_box(limits.slip_accel)
+        es += [half + g, half - g]
     c = np.concatenate(cs, axis=1)
     d = np.concatenate(ds, axis=1)
     e = np.concatenate(es, axis=1)

@@ -153,6 +153,7 @@ class RunResult:
     planning_time_s: float | None = None
     recording: str | None = None
     robot: str | None = None
+    parameters: dict[str, Any] | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable summary (the keys are an interface: see the README)."""
@@ -183,6 +184,8 @@ class RunResult:
             for e in self.events
         ]
         out["recording"] = self.recording
+        if self.parameters is not None:  # only when something was varied
+            out["parameters"] = self.parameters
         return out
 
 

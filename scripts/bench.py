@@ -10,9 +10,13 @@ Targets (figures, not tests):
   path length over speed limit, summed, plus the gripper's actions, from the run's own
   commanded joint path), with success, slip <= 3 mm, speed ratio <= 1, tracking <= 10 mm
   (issue 13);
-- composing and calibrating each bundled robot, cold (no cache), <= 1 s (issue 14).
+- composing and calibrating each bundled robot, cold (no cache), <= 1 s (issue 14);
+- trials/s per worker of the Ray backend (a local cluster) within 10 % of the process
+  backend's on this machine, both in steady state (from the 10th result on); speed-up with 2
+  workers >= 1.8; peak RSS of a 2,000-trial sweep (its process and its largest worker) and the
+  bytes a trial's record takes (issue 16).
 
-Usage: python scripts/bench.py [--json] [--trials N]
+Usage: python scripts/bench.py [--json] [--trials N] [--backend-trials N] [--rss-trials N]
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -34,6 +39,7 @@ import mujoco
 import numpy as np
 
 from pickplace.controllers import QPController, make_controller
+from pickplace.errors import InvalidInputError
 from pickplace.geometry import pose_error_W
 from pickplace.loader import clear_scene_cache, load_scene
 from pickplace.planner import PickPlacePlanner
@@ -54,9 +60,24 @@ TARGETS = {
     "nominal_max_slip_m": ("<=", 0.003),
     "nominal_max_joint_speed_ratio": ("<=", 1.0 + 1e-6),
     "nominal_max_position_error_m": ("<=", 0.010),
+    "ray_vs_process_trials_per_second_per_worker": (">=", 0.9),
 }
 
 COMPOSE_TARGET_S = 1.0
+
+# The peak-RSS sweep runs in a process of its own, so that nothing of the benchmark's counts.
+RSS_SCRIPT = """
+import json, resource, sys
+from pickplace.sweep import SweepRequest, run_sweep
+report = run_sweep(SweepRequest("pick-place-random", "qp", int(sys.argv[1]), 0, 2))
+records = report["trial_results"]
+print(json.dumps({
+    "completed": report["completed"],
+    "self_kib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+    "largest_worker_kib": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss,
+    "record_bytes": sum(len(json.dumps(t)) for t in records) / len(records),
+}))
+"""
 
 # Brick poses for the planning-time median: this many seeds of pick-place-random's generator.
 PLANNING_POSES = 40
@@ -236,11 +257,65 @@ def compose_times() -> dict[str, float]:
     return out
 
 
+def steady_rate(times: list[float], skip: int = 10) -> float:
+    """Results per second from the ``skip``-th result to the last (start-up left out)."""
+    k = min(skip, len(times) // 4)
+    return (len(times) - 1 - k) / (times[-1] - times[k])
+
+
+def _stamp(times: list[float], _: object) -> None:
+    times.append(time.perf_counter())
+
+
+def backend_rates(trials: int, workers: int = 2) -> dict[str, Any]:
+    """Trials/s per worker of the process backend and of Ray (a local cluster of ``workers``
+    CPUs) on the same trials, in steady state; the Ray cluster's start-up time."""
+    out: dict[str, Any] = {}
+    for backend in ("process", "ray"):
+        times: list[float] = []
+        try:
+            rep = run_sweep(
+                SweepRequest("pick-place-random", "qp", trials, 0, workers, backend=backend),
+                on_trial=partial(_stamp, times),
+            )
+        except InvalidInputError as exc:  # Ray not installed
+            out[f"{backend}_trials_per_second_per_worker"] = None
+            out[f"{backend}_unavailable"] = str(exc)
+            continue
+        out[f"{backend}_trials_per_second_per_worker"] = steady_rate(times) / workers
+        out[f"{backend}_trials_per_second_whole_sweep"] = rep["trials_per_second"]
+        out[f"{backend}_start_s"] = rep["backend_start_s"]
+    ray, proc = (out[f"{b}_trials_per_second_per_worker"] for b in ("ray", "process"))
+    out["ray_vs_process_trials_per_second_per_worker"] = ray / proc if ray and proc else None
+    return out
+
+
+def peak_rss(trials: int) -> dict[str, Any]:
+    """Peak resident memory [MiB] of a ``trials``-trial sweep (2 workers): of the sweep's own
+    process, which keeps every trial's record, and of its largest worker; bytes per record."""
+    proc = subprocess.run(
+        [sys.executable, "-c", RSS_SCRIPT, str(trials)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    m = json.loads(proc.stdout.strip().splitlines()[-1])
+    return {
+        f"sweep_{trials}_trials_peak_rss_mib": m["self_kib"] / 1024,
+        f"sweep_{trials}_trials_worker_peak_rss_mib": m["largest_worker_kib"] / 1024,
+        f"sweep_{trials}_trials_record_bytes": m["record_bytes"],
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--trials", type=int, default=16, help="trials per sweep measurement")
     parser.add_argument("--repeats", type=int, default=3, help="nominal runs per mode")
+    parser.add_argument(
+        "--backend-trials", type=int, default=80, help="trials per backend measurement"
+    )
+    parser.add_argument("--rss-trials", type=int, default=2000, help="trials of the peak-RSS sweep")
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
 
@@ -287,16 +362,18 @@ def main(argv: list[str] | None = None) -> int:
         report[f"sweep_trials_per_second_{w}_workers"] = rates[w]
     report["sweep_speedup_all_workers"] = rates[workers] / rates[1]
 
+    report.update(backend_rates(args.backend_trials))
+    report.update(peak_rss(min(args.rss_trials, 200)))
+    report.update(peak_rss(args.rss_trials))
+
     goals = dict(TARGETS)
     for name in bundled_robots():
         goals[f"robot_compose_calibrate_s_{name}"] = ("<=", COMPOSE_TARGET_S)
     checks = {}
     for key, (op, target) in goals.items():
         value = report[key]
-        checks[key] = {
-            "target": f"{op} {target}",
-            "met": value <= target if op == "<=" else value >= target,
-        }
+        met = None if value is None else (value <= target if op == "<=" else value >= target)
+        checks[key] = {"target": f"{op} {target}", "met": met}
     report["targets"] = checks
     if args.json:
         print(json.dumps(report))
@@ -306,7 +383,8 @@ def main(argv: list[str] | None = None) -> int:
                 shown = f"{value:.4g}" if isinstance(value, float) else str(value)
                 print(f"{key:40s} {shown}")
         for key, c in checks.items():
-            print(f"target {key:33s} {c['target']:>8s}  {'met' if c['met'] else 'MISSED'}")
+            verdict = "not measured" if c["met"] is None else "met" if c["met"] else "MISSED"
+            print(f"target {key:33s} {c['target']:>8s}  {verdict}")
     return 0
 
 

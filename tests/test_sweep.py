@@ -3,12 +3,28 @@
 from __future__ import annotations
 
 import json
+import shlex
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
 from pickplace.errors import InvalidInputError
-from pickplace.sweep import SWEEP_WALL_TIME_FIELDS, SweepRequest, run_sweep
-from tests.conftest import run_cli
+from pickplace.outfile import OutputFile
+from pickplace.stats import compare_paired
+from pickplace.sweep import (
+    SWEEP_WALL_TIME_FIELDS,
+    SweepRequest,
+    compact_summary,
+    parse_compare,
+    run_sweep,
+)
+from pickplace.sweep_recording import record_sweep
+from pickplace.sweep_report import report_text
+from pickplace.vary import parse_vary
+from tests.conftest import REPO, run_cli, run_cli_json
+from tests.test_recording import read_entities
 
 
 def _without_timing(report: dict) -> dict:
@@ -52,3 +68,173 @@ def test_sweep_cli_bad_input_is_one_line() -> None:
     proc = run_cli("sweep", "--workers", "0")
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+# ---------------------------------------------------------------------- varied parameters
+
+MASS_FRICTION = ["brick_mass=0.2:3", "friction=0.2,1"]
+G = 9.81
+
+
+@pytest.fixture(scope="module")
+def varied() -> dict:
+    plan = parse_vary(MASS_FRICTION)
+    return run_sweep(SweepRequest("pick-place-random", "qp", 8, 20, 2, vary=plan))
+
+
+def test_each_trial_records_its_draw_and_the_bins_add_up(varied: dict) -> None:
+    plan = parse_vary(MASS_FRICTION)
+    trials = varied["trial_results"]
+    assert [t["seed"] for t in trials] == list(range(20, 28))
+    for t in trials:
+        assert t["parameters"] == plan.draw(t["seed"]).as_dict()
+        assert "events" not in t and "plan" not in t  # compact: no event list, no plan
+    for name, bins in varied["by_parameter"].items():
+        assert sum(b["trials"] for b in bins) == 8, name
+        assert sum(b["successes"] for b in bins) == varied["successes"], name
+    assert [b["low"] for b in varied["by_parameter"]["friction"]] == [0.2, 1.0]
+
+
+def test_no_brick_is_refused_for_its_mass_the_physics_judges_it(varied: dict) -> None:
+    # μ · 2 pads · 40 N holds m · g at rest up to m = 1.63 kg with μ = 0.2: heavier ones are
+    # planned (with a warning), carried, and dropped, never refused.
+    for t in varied["trial_results"]:
+        v = t["parameters"]["values"]
+        assert t["failure"] != "no-feasible-plan", t
+        if v["friction"] * 2 * 40.0 < v["brick_mass"] * G:
+            assert t["failure"] == "dropped", t
+    assert "dropped" in varied["failures"]
+
+
+def test_a_failed_trial_re_runs_alone_from_the_printed_command(varied: dict) -> None:
+    reason, failure = next(iter(varied["failures"].items()))
+    command = shlex.split(failure["rerun"])
+    assert command[:2] == ["pickplace", "run"]
+    code, summary = run_cli_json(*command[2:])
+    assert code == 1
+    trial = next(t for t in varied["trial_results"] if t["seed"] == failure["example_seed"])
+    assert compact_summary(summary) == trial
+    assert summary["failure"] == reason
+
+
+def test_the_text_report_states_rate_interval_failures_metrics_and_bins(varied: dict) -> None:
+    text = report_text(varied)
+    r = varied["success_interval"]
+    assert f"(95 % Wilson {100 * r['low']:.1f} %–{100 * r['high']:.1f} %)" in text
+    for reason, f in varied["failures"].items():
+        assert f"{reason}: {f['count']}" in text
+        assert f"re-run: {f['rerun']}" in text
+    assert "success by brick_mass [kg]" in text and "success by friction" in text
+    assert "cycle time [s]: p50" in text
+
+
+# ---------------------------------------------------------------------- paired comparison
+
+
+def test_compare_runs_every_seed_per_arm_with_the_same_parameters() -> None:
+    # pick-place (not -random, whose pose draws are repeated until the run's own controller's
+    # pre-flight passes, so arms may get different poses for one seed).
+    plan = parse_vary(["pose_noise=0:0.05"])
+    req = SweepRequest(
+        "pick-place", trials=3, first_seed=40, workers=2, vary=plan,
+        compare=parse_compare("controller=qp,dls"),
+    )  # fmt: skip
+    report = run_sweep(req)
+    assert report["runs"] == report["completed"] == 6 and report["controller"] is None
+    trials = report["trial_results"]
+    by_arm = {a: [t for t in trials if t["arm"] == a] for a in ("controller=qp", "controller=dls")}
+    assert [t["controller"] for t in by_arm["controller=dls"]] == ["dls"] * 3
+    for qp, dls in zip(by_arm["controller=qp"], by_arm["controller=dls"], strict=True):
+        assert qp["seed"] == dls["seed"]
+        assert qp["parameters"] == dls["parameters"]
+        assert qp["brick_start_xyz"] == dls["brick_start_xyz"]
+    (paired,) = report["compare"]["paired"]
+    expected = compare_paired(
+        [t["success"] for t in by_arm["controller=qp"]],
+        [t["success"] for t in by_arm["controller=dls"]],
+    )
+    assert paired == {"a": "controller=qp", "b": "controller=dls", **expected.as_dict()}
+    for label, arm in report["compare"]["arms"].items():
+        assert arm["completed"] == 3
+        assert arm["successes"] == sum(t["success"] for t in by_arm[label])
+    text = report_text(report)
+    assert "controller=qp − controller=dls on 3 paired seeds" in text
+    assert "Newcombe" in text
+
+
+# ---------------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--vary", "mass=1:2"], "valid: brick_mass [kg]"),
+        (["--vary", "control_rate=100:500"], "grid of values only"),
+        (["--vary", "control_rate=100,300"], "not a whole number of physics steps"),
+        (["--compare", "controller=qp"], "two or more different values"),
+        (["--compare", "controller=qp,fast"], "fast"),
+        (["--compare", "colour=red,blue"], "can compare controller"),
+        (["--controller", "dls", "--compare", "controller=qp,dls"], "give one"),
+        (["--speed", "0.5", "--vary", "speed=0.2:0.4"], "--speed and --vary speed"),
+        (["--address", "10.0.0.1:6379"], "--address needs --backend ray"),
+        (["--backend", "spark"], "invalid choice"),
+        (["--backend", "ray", "--address", "localhost"], "not a Ray cluster address"),
+    ],
+)
+def test_bad_sweep_options_are_exit_2_in_one_line(args: list[str], message: str) -> None:
+    proc = run_cli("sweep", "--trials", "1", *args)
+    assert proc.returncode == 2, proc.stderr
+    (line,) = proc.stderr.strip().splitlines()
+    assert message in line
+
+
+def test_without_ray_the_ray_backend_is_exit_2_with_the_install_command() -> None:
+    code = (
+        "import sys; sys.modules['ray'] = None\n"  # import ray fails, as when it is missing
+        "from pickplace.cli import main\n"
+        "sys.exit(main(['sweep', '--trials', '1', '--backend', 'ray']))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60
+    )
+    assert proc.returncode == 2
+    (line,) = proc.stderr.strip().splitlines()
+    assert "pip install 'pickplace[ray]'" in line
+
+
+# ---------------------------------------------------------------------- recording
+
+
+def test_a_sweep_recording_appears_complete_with_its_report(tmp_path: Path) -> None:
+    path = tmp_path / "sweep.rrd"
+    proc = run_cli(
+        "sweep", "--trials", "3", "--seed", "2", "--vary", "pose_noise=0:0.03",
+        "--record", str(path), "--json",
+    )  # fmt: skip
+    assert proc.returncode in (0, 1), proc.stderr
+    report = json.loads(proc.stdout)
+    assert report["recording"] == str(path)
+    ents = read_entities(path)
+    assert {"report", "world/legend", "plots/success_by/pose_noise/bars"} <= set(ents)
+    points = [p for n, e in ents.items() if n.startswith("world/trials/") and
+              "Points3D:positions" in e.static for p in e.static["Points3D:positions"]]  # fmt: skip
+    assert len(points) == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.rrd"]  # no temp, no lock
+
+
+def test_a_compared_sweep_is_recorded_per_arm(tmp_path: Path) -> None:
+    plan = parse_vary(["brick_mass=0.2:3"])
+    req = SweepRequest(
+        "pick-place", trials=2, workers=1, vary=plan, compare=parse_compare("controller=qp,dls")
+    )
+    report = run_sweep(req)
+    path = tmp_path / "compare.rrd"
+    output = OutputFile(path)
+    output.open()
+    assert record_sweep(output, req, report) == path
+    ents = read_entities(path)
+    for arm in ("controller-qp", "controller-dls"):
+        assert f"plots/{arm}/success_by/brick_mass/counts" in ents
+        assert any(n.startswith(f"world/trials/{arm}/") for n in ents)
+    (text,) = ents["report"].static["TextDocument:text"]
+    assert "controller=qp − controller=dls" in text

@@ -13,11 +13,13 @@ from pickplace.errors import InvalidInputError, PlanError
 from pickplace.plan import PlanConfig
 from pickplace.runner import RunRequest, prepare
 from pickplace.timing import (
+    GRAVITY_W,
     SegmentLimits,
     TimingConfig,
     cycle_time_bound,
     path_derivatives,
     scaled_law,
+    slip_box,
     time_optimal_law,
 )
 
@@ -113,6 +115,16 @@ def test_tool_and_slip_limits_bind_when_they_are_the_tightest() -> None:
     assert max(slow.u_dot) * 0.3 <= 0.05 * (1 + 1e-9)
     with pytest.raises(PlanError, match="too heavy for the grip"):
         time_optimal_law(q, dp, np.zeros(3), SegmentLimits(V_MAX, A_MAX, slip_accel=5.0))
+
+
+@pytest.mark.parametrize("budget", [9.82, 12.0, 30.0, 63.0, 64.0, 400.0])
+def test_the_slip_box_lies_in_the_friction_ball_and_holds_the_brick_at_rest(budget: float) -> None:
+    half = slip_box(budget)
+    g = np.abs(GRAVITY_W)
+    assert np.linalg.norm(half) <= budget * (1 + 1e-12)  # every corner of the box in the ball
+    assert np.all(half >= g) and np.all(half > 0)  # a = 0 inside: |−g_i| ≤ half_i
+    if budget / np.sqrt(3) >= (budget + 9.81) / 2:  # the cube holds g with room to spare
+        np.testing.assert_allclose(half, budget / np.sqrt(3))
 
 
 def test_a_law_can_be_slowed_but_not_sped_up() -> None:

@@ -1,0 +1,127 @@
+"""The Ray backend gives the process backend's per-seed outcomes, on a cluster this test starts.
+
+CI installs the ``ray`` extra (the README's test command); without Ray these tests are skipped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from pickplace.sweep import SWEEP_WALL_TIME_FIELDS, SweepRequest, run_sweep
+from pickplace.vary import parse_vary
+from tests.conftest import REPO
+
+pytest.importorskip("ray")
+
+# Brick mass across the grip's limit (2.35 kg: the heavier ones are refused before any physics)
+# and pose noise up to half the brick's width: successes, missed grasps and refusals.
+VARY = ["brick_mass=0.2:12", "pose_noise=0:0.05"]
+# Fields that differ between backends by design (wall clock, the backend, its parallelism).
+BACKEND_FIELDS = {*SWEEP_WALL_TIME_FIELDS, "backend", "workers"}
+
+CLUSTER = """
+import logging, sys
+import ray
+ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+         logging_level=logging.ERROR, object_store_memory=128 * 1024 * 1024)
+print(ray.get_runtime_context().gcs_address, flush=True)
+sys.stdin.read()  # until the test closes it
+ray.shutdown()
+"""
+
+
+@contextlib.contextmanager
+def local_cluster() -> Iterator[str]:
+    """A local Ray cluster (2 CPUs) in a process of its own; yields its address and stops it
+    when the block ends."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CLUSTER],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        cwd=REPO,
+    )
+    try:
+        assert proc.stdout is not None
+        address = proc.stdout.readline().strip()
+        assert address, "the Ray cluster did not start"
+        yield address
+    finally:
+        assert proc.stdin is not None
+        proc.stdin.close()  # ray.shutdown() stops the cluster's processes
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def cli(*args: str) -> subprocess.Popen[str]:
+    # Ray's clusters use token authentication (the token in ~/.ray, shared on this machine);
+    # a driver that joins one says so.
+    env = dict(os.environ, RAY_AUTH_MODE="token")
+    return subprocess.Popen(
+        [sys.executable, "-m", "pickplace.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+        env=env,
+    )
+
+
+def without_backend(report: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in report.items() if k not in BACKEND_FIELDS}
+
+
+@pytest.mark.slow
+def test_ray_and_process_backends_give_identical_per_seed_outcomes_for_200_trials() -> None:
+    args = ["--trials", "200", "--seed", "1000", *(f"--vary={v}" for v in VARY), "--json"]
+    with local_cluster() as address:
+        proc = cli("sweep", "--backend", "ray", "--address", address, *args)
+        out, err = proc.communicate(timeout=900)
+    assert proc.returncode == 1, err  # some trials fail, by design
+    assert err.strip() == ""  # none of Ray's own lines
+    ray = json.loads(out)
+    process = run_sweep(
+        SweepRequest("pick-place-random", "qp", 200, 1000, 2, vary=parse_vary(VARY))
+    )
+    assert ray["backend"] == "ray" and process["backend"] == "process"
+    assert ray["workers"] == 2  # the cluster's CPUs
+    assert [t["seed"] for t in ray["trial_results"]] == list(range(1000, 1200))
+    # Every trial's outcome, metrics and parameters, bit for bit (through JSON).
+    assert ray["trial_results"] == json.loads(json.dumps(process["trial_results"]))
+    assert without_backend(ray) == json.loads(json.dumps(without_backend(process)))
+    reasons = set(process["failures_by_reason"])
+    assert {"dropped", "missed-grasp"} <= reasons, reasons
+    assert 0 < process["successes"] < 200
+
+
+@pytest.mark.slow
+def test_a_ray_sweep_on_its_own_cluster_stops_on_sigterm_with_a_partial_report() -> None:
+    proc = cli("sweep", "--backend", "ray", "--workers", "2", "--trials", "400", "--json")
+    time.sleep(15.0)  # the cluster is up, trials are running
+    assert proc.poll() is None
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    took = time.monotonic() - t0
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert took < 10.0, took  # cancel the tasks, stop the cluster
+    assert err.strip() == "pickplace: stopped by SIGTERM"
+    report = json.loads(out)
+    assert report["interrupted"] is True
+    assert report["completed"] < 400
+    assert report["completed"] == report["successes"] + sum(report["failures_by_reason"].values())
+    assert "interrupted" not in report["failures_by_reason"]
