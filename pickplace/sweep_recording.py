@@ -65,7 +65,7 @@ from pickplace.loader import load_scene
 from pickplace.outfile import OutputFile
 from pickplace.scene import BinGeometry, Scene
 from pickplace.stats import RateInterval, success_rate
-from pickplace.sweep_report import METRICS, Metric, metric_summary, outcome_of
+from pickplace.sweep_report import METRICS, Metric, metric_summary, outcome_of, sweep_title
 from pickplace.vary import BinStat, ParameterDraw, VaryPlan, VarySpec, success_by_parameter
 
 if TYPE_CHECKING:
@@ -534,18 +534,27 @@ def report_markdown(
     controller = report.get("controller") or trials[0].get("controller", "?")
     varied = plan.describe() if plan is not None else "nothing varied but the seed"
     compare = report.get("compare")
+    title = sweep_title(
+        {
+            "scenario": scenario,
+            "robot": report.get("robot"),
+            "controller": controller if compare is None else report.get("controller"),
+            "compare": compare,
+            "compare_flag": report.get("compare_flag"),
+        }
+    )
     lines: list[str] = []
     if compare is None:
         lines += _outcome_markdown(
             trials,
-            f"{scenario} / {controller}",
+            title,
             plan,
             by_parameter,
             _rerun_commands(report, trials, plan),
         )
         lines[4:4] = [f"Varied: {varied}.", ""]
     else:
-        lines += [f"# {scenario}: {report.get('compare_flag')}", "", f"Varied: {varied}.", ""]
+        lines += [f"# {title}", "", f"Varied: {varied}.", ""]
         for p in compare.get("paired", []):
             lines += [
                 f"**{p['a']} − {p['b']}: {100 * p['difference']:+.1f} points** on "

@@ -312,12 +312,24 @@ def _outcome_lines(r: Mapping[str, Any], plan_units: Mapping[str, str], indent: 
     return lines
 
 
+def sweep_title(report: Mapping[str, Any]) -> str:
+    """``scenario / robot / controller`` as a run's title names them; a compared key gives
+    its ``--compare`` flag in its place."""
+    compared = report.get("compare")
+    parts = [str(report["scenario"])]
+    for key in ("robot", "controller"):
+        if report.get(key) is not None:
+            parts.append(str(report[key]))
+        elif compared is not None and compared.get("key") == key:
+            parts.append(str(report["compare_flag"]))
+    return " / ".join(parts)
+
+
 def report_text(report: Mapping[str, Any]) -> str:
     """The report for a person, in lines of plain text."""
     rate = report["trials_per_second"]
-    what = report["controller"] if report.get("compare") is None else report["compare_flag"]
     head = (
-        f"{report['scenario']} / {what}: {report['successes']}/{report['completed']} "
+        f"{sweep_title(report)}: {report['successes']}/{report['completed']} "
         f"succeeded, {_interval(report['success_interval'])}"
     )
     if report["completed"] < report["runs"]:

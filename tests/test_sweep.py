@@ -119,6 +119,7 @@ def test_a_failed_trial_re_runs_alone_from_the_printed_command(varied: dict) -> 
 
 def test_the_text_report_states_rate_interval_failures_metrics_and_bins(varied: dict) -> None:
     text = report_text(varied)
+    assert text.startswith("pick-place-random / iiwa14-wsg50 / qp: ")  # as a run names itself
     r = varied["success_interval"]
     assert f"(95 % Wilson {100 * r['low']:.1f} %–{100 * r['high']:.1f} %)" in text
     for reason, f in varied["failures"].items():
