@@ -310,7 +310,7 @@ def peak_rss(trials: int) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--trials", type=int, default=16, help="trials per sweep measurement")
+    parser.add_argument("--trials", type=int, default=64, help="trials per sweep measurement")
     parser.add_argument("--repeats", type=int, default=3, help="nominal runs per mode")
     parser.add_argument(
         "--backend-trials", type=int, default=80, help="trials per backend measurement"
