@@ -81,10 +81,11 @@ def read_columns(path: Path) -> dict[str, dict[str, Any]]:
                 entity["rows"][name].extend(values)
     for entity in entities.values():
         rows = entity["rows"]
-        if "tick" in rows:
+        if "tick" in rows:  # temporal chunks may arrive in any order: sort rows by tick
             order = np.argsort(rows["tick"], kind="stable")
             for name, values in rows.items():
-                rows[name] = [values[i] for i in order]
+                if len(values) == len(order):
+                    rows[name] = [values[i] for i in order]
         entity["rows"] = dict(rows)
     return dict(entities)
 

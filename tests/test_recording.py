@@ -22,6 +22,7 @@ from pickplace.recording import Recorder
 from pickplace.scenarios import BuildRequest, get_scenario
 from pickplace.scene import Scene
 from pickplace.sim import RunResult, Simulation
+from scripts.golden_recording import read_columns
 
 RECORDING_ID = "pick-place/qp/seed-0"
 
@@ -47,31 +48,12 @@ class Recording:
 
 
 def read_entities(path: Path) -> dict[str, Entity]:
-    """Entity path (without the leading '/') → its static components and temporal rows."""
-    entities: dict[str, Entity] = defaultdict(Entity)
-    for chunk in RrdReader(path).store().stream():
-        entity = entities[chunk.entity_path.lstrip("/")]
-        batch = chunk.to_record_batch()
-        for name in batch.schema.names:
-            if name == "rerun.controls.RowId":
-                continue
-            column = batch.column(name)
-            if name == "sim_time":
-                column = column.cast("int64")  # duration[ns]
-            values = column.to_pylist()
-            if chunk.is_static:
-                entity.static[name] = values[-1]
-            else:
-                entity.rows[name].extend(values)
-    # Temporal chunks of one entity may arrive in any order: sort every column by tick.
-    for entity in entities.values():
-        ticks = entity.rows.get("tick")
-        if ticks:
-            order = np.argsort(ticks, kind="stable")
-            for name, values in entity.rows.items():
-                if len(values) == len(order):
-                    entity.rows[name] = [values[i] for i in order]
-    return dict(entities)
+    """Entity path (without the leading '/') → its static components and temporal rows
+    (ordered by tick), as the golden recording reads them."""
+    return {
+        name: Entity(static=e["static"], rows=defaultdict(list, e["rows"]))
+        for name, e in read_columns(path).items()
+    }
 
 
 def run_recorded(path: Path, *, stop_at: int | None = None) -> tuple[RunResult, Scene]:
