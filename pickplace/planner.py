@@ -235,23 +235,22 @@ class PickPlacePlanner:
         shows what happens: first within the friction itself (no safety factor), and if even
         that cannot hold it, within the robot's limits alone. The warning says which.
         """
-        timing = self.timing
 
-        def timed_within(slip: float | None) -> Plan:
+        def timed_within(timing: TimingConfig, slip: float | None) -> Plan:
             def limits(carried: bool) -> SegmentLimits:
                 return timing.limits(self.scene.v_max, self.scene.a_max, slip if carried else None)
 
             return retime(path, times, q, limits)
 
         try:
-            return timed_within(self.slip_accel), None
+            return timed_within(self.timing, self.slip_accel), None
         except GripTooWeakError as exc:
             problem = str(exc)
         try:
-            timed = timed_within(self.slip_accel * timing.slip_safety_factor)
+            timed = timed_within(replace(self.timing, slip_safety_factor=1.0), self.slip_accel)
             how = "within the friction itself, without the slip safety factor"
         except GripTooWeakError:
-            timed = timed_within(None)
+            timed = timed_within(self.timing, None)
             how = "within the robot's limits alone: expect the brick to slip or drop"
         return timed, f"{problem}; the plan is timed {how}"
 
