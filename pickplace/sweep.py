@@ -34,7 +34,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
@@ -172,19 +172,9 @@ class SweepRequest:
         )
         if self.compare is None:
             return (base,)
-        c = self.compare
-        return tuple(
-            TrialSpec(
-                self.scenario,
-                v if c.key == "controller" else self.controller,
-                self.speed,
-                self.control_rate_hz,
-                self.vary,
-                v if c.key == "robot" else self.robot,
-                arm=f"{c.key}={v}",
-            )
-            for v in c.values
-        )
+        key = self.compare.key  # a str field of TrialSpec (COMPARABLE)
+        arms: list[dict[str, Any]] = [{key: v, "arm": f"{key}={v}"} for v in self.compare.values]
+        return tuple(replace(base, **arm) for arm in arms)
 
     @property
     def seeds(self) -> range:
