@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from pickplace.errors import InvalidInputError, OutputError, PickPlaceError
+from pickplace.errors import OutputError, PickPlaceError
 from pickplace.robot import DEFAULT_ROBOT
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
@@ -573,16 +573,14 @@ def _cmd_robots(args: argparse.Namespace, stop: InterruptHandler) -> int:
 def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.outfile import OutputFile
     from pickplace.runner import validate_record_path
-    from pickplace.sweep import SweepRequest, parse_compare, run_sweep
+    from pickplace.sweep import SweepRequest, given_and_compared, parse_compare, run_sweep
     from pickplace.sweep_report import report_text
     from pickplace.vary import parse_vary
 
     compare = parse_compare(args.compare) if args.compare else None
     for key, given in (("controller", args.controller), ("robot", args.robot)):
         if given is not None and compare is not None and compare.key == key:
-            raise InvalidInputError(
-                f"--{key} and --compare {key}=... both set the {key}; give one", field=key
-            )
+            raise given_and_compared(key)
     req = SweepRequest(
         scenario=args.scenario,
         controller=args.controller or "qp",

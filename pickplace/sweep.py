@@ -34,7 +34,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
@@ -111,6 +111,11 @@ class Comparison:
     def as_dict(self) -> dict[str, Any]:
         """JSON form."""
         return {"key": self.key, "values": list(self.values)}
+
+
+def given_and_compared(key: str) -> InvalidInputError:
+    """The error for a trial field (one of :data:`COMPARABLE`) both given and compared."""
+    return InvalidInputError(f"the {key} is given and also compared; give one of them", field=key)
 
 
 def parse_compare(text: str) -> Comparison:
@@ -203,18 +208,10 @@ class SweepRequest:
             )
         if self.address is not None and self.backend != "ray":
             raise InvalidInputError("--address needs --backend ray (the address of its cluster)")
-        if (
-            self.compare is not None
-            and self.compare.key == "controller"
-            and self.controller != "qp"
-        ):
-            raise InvalidInputError(
-                "--controller and --compare controller=... both set the controller; give one"
-            )
-        if self.compare is not None and self.compare.key == "robot" and self.robot != DEFAULT_ROBOT:
-            raise InvalidInputError(
-                "--robot and --compare robot=... both set the robot; give one", field="robot"
-            )
+        if self.compare is not None:
+            key = self.compare.key
+            if getattr(self, key) != next(f.default for f in fields(self) if f.name == key):
+                raise given_and_compared(key)
         for spec in self.specs():
             resolve_description(spec.robot)
         for spec in self.specs():
