@@ -39,7 +39,7 @@ from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from pickplace.controllers import CONTROLLERS
-from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.errors import InvalidInputError, RobotError, UnknownNameError
 from pickplace.loader import load_scene
 from pickplace.robot import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
 from pickplace.runner import MAX_SEED, resolve_control_rate, validate_request
@@ -101,7 +101,10 @@ class Comparison:
                     raise UnknownNameError("controller", v, CONTROLLERS)
         if self.key == "robot":
             for v in values:
-                resolve_description(v)  # RobotError: unknown name or a bad robot.toml
+                try:
+                    resolve_description(v)
+                except RobotError as exc:  # unknown name or a bad robot.toml
+                    raise InvalidInputError(f"--compare robot=...: {exc}") from exc
         object.__setattr__(self, "values", values)
 
     def flag(self) -> str:
@@ -122,7 +125,8 @@ def parse_compare(text: str) -> Comparison:
     """Parse ``KEY=A,B[,C...]``.
 
     Raises:
-        InvalidInputError: Bad syntax, a key that cannot be compared, fewer than two values.
+        InvalidInputError: Bad syntax, a key that cannot be compared, fewer than two values,
+            a robot that is not bundled or whose robot.toml cannot be read.
         UnknownNameError: An unknown controller.
     """
     key, sep, rest = text.partition("=")

@@ -176,6 +176,7 @@ def test_compare_runs_every_seed_per_arm_with_the_same_parameters() -> None:
         (["--compare", "controller=qp,fast"], "fast"),
         (["--compare", "colour=red,blue"], "can compare controller"),
         (["--controller", "dls", "--compare", "controller=qp,dls"], "give one"),
+        (["--compare", "robot=panda-hand,nosuch"], "--compare robot=...: unknown robot 'nosuch'"),
         (["--speed", "0.5", "--vary", "speed=0.2:0.4"], "--speed and --vary speed"),
         (["--address", "10.0.0.1:6379"], "--address needs --backend ray"),
         (["--backend", "spark"], "invalid choice"),
