@@ -340,11 +340,11 @@ def _validate_parameters(req: RunRequest, draw: ParameterDraw) -> None:
         )
     if "speed" in draw.values and req.speed != 1.0:
         raise InvalidInputError(
-            "--speed and --vary speed both set the speed; give one of them", field="speed"
+            "the speed is given and also varied; give one of them", field="speed"
         )
     if "control_rate" in draw.values and req.control_rate_hz != 100.0:
         raise InvalidInputError(
-            "--control-rate and --vary control_rate both set the control rate; give one of them",
+            "the control rate is given and also varied; give one of them",
             field="control_rate_hz",
         )
 

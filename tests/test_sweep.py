@@ -177,7 +177,10 @@ def test_compare_runs_every_seed_per_arm_with_the_same_parameters() -> None:
         (["--compare", "colour=red,blue"], "can compare controller"),
         (["--controller", "dls", "--compare", "controller=qp,dls"], "give one"),
         (["--compare", "robot=panda-hand,nosuch"], "--compare robot=...: unknown robot 'nosuch'"),
-        (["--speed", "0.5", "--vary", "speed=0.2:0.4"], "--speed and --vary speed"),
+        (
+            ["--speed", "0.5", "--vary", "speed=0.2:0.4"],
+            "--speed: the speed is given and also varied; give one of them",
+        ),
         (["--address", "10.0.0.1:6379"], "--address needs --backend ray"),
         (["--backend", "spark"], "invalid choice"),
         (["--backend", "ray", "--address", "localhost"], "not a Ray cluster address"),
