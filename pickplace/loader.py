@@ -79,15 +79,19 @@ def load_scene(
             naming the file, the field and what would be valid).
     """
     path = (Path(world) if world is not None else DEFAULT_WORLD).resolve()
-    spec = parse_scene(path)
+    try:
+        content = path.read_bytes()
+    except OSError:
+        parse_scene(path)  # raises the SceneError that names what is wrong with the path
+        raise
     desc = resolve_description(robot)
     names = names or WorldNames()
-    key = hashlib.sha256(path.read_bytes())
+    key = hashlib.sha256(content)
     for part in (str(path), description_digest(desc), repr(names), str(pad_slots)):
         key.update(part.encode())
     template = _SCENES.get(key.hexdigest())
-    if template is None:
-        template = _compose(spec, path, desc, names, pad_slots)
+    if template is None:  # parsed only to compose: a cached scene's file parsed before
+        template = _compose(parse_scene(path), path, desc, names, pad_slots)
         _SCENES[key.hexdigest()] = template
     return dataclasses.replace(template, model=copy.deepcopy(template.model))
 
