@@ -572,6 +572,34 @@ def cycle_time_bound(
         q: Joint positions at times k·dt (n, joints), e.g. a run's commanded joints.
         v_max: Joint speed limits [rad/s].
     """
+    return _motion_time(keyframes, dt, q, v_max, lambda steps: float(np.max(steps.sum(axis=0))))
+
+
+def cycle_time_at_speed_limits(
+    keyframes: Sequence[Keyframe], dt: float, q: np.ndarray, v_max: np.ndarray
+) -> float:
+    """The time of a plan's motion along a joint path at the joint speed limits alone [s]:
+    at every step the path moves as fast as its tightest joint allows, with no acceleration
+    limit, so each motion takes ∫ max_j |dqⱼ| / vⱼ (the per-step maximum, summed), plus the
+    in-place segments' own durations.
+
+    It lies between :func:`cycle_time_bound` (the maximum taken per segment, after summing)
+    and the time of any timing of the path within the speed limits; what a timing takes
+    beyond it is spent in the acceleration limits (starting, stopping, turning) and in any
+    speed margin. Arguments as :func:`cycle_time_bound`.
+    """
+    return _motion_time(keyframes, dt, q, v_max, lambda steps: float(steps.max(axis=1).sum()))
+
+
+def _motion_time(
+    keyframes: Sequence[Keyframe],
+    dt: float,
+    q: np.ndarray,
+    v_max: np.ndarray,
+    moving: Callable[[np.ndarray], float],
+) -> float:
+    """In-place segments' durations plus ``moving`` of each moving segment's joint steps
+    |Δq| / v_max (ticks, joints) [s]."""
     total = 0.0
     for a, b in itertools.pairwise(keyframes):
         dp = b.X_WG.translation() - a.X_WG.translation()
@@ -580,6 +608,5 @@ def cycle_time_bound(
             total += b.t - a.t
             continue
         k0, k1 = round(a.t / dt), min(round(b.t / dt), len(q) - 1)
-        length = np.abs(np.diff(q[k0 : k1 + 1], axis=0)).sum(axis=0)
-        total += float(np.max(length / np.asarray(v_max)))
+        total += moving(np.abs(np.diff(q[k0 : k1 + 1], axis=0)) / np.asarray(v_max))
     return total

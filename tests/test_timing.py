@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from mink.lie import SE3
 
 from pickplace.errors import InvalidInputError, PlanError
 from pickplace.plan import PlanConfig
@@ -16,12 +17,14 @@ from pickplace.timing import (
     GRAVITY_W,
     SegmentLimits,
     TimingConfig,
+    cycle_time_at_speed_limits,
     cycle_time_bound,
     path_derivatives,
     scaled_law,
     slip_box,
     time_optimal_law,
 )
+from pickplace.trajectory import Keyframe
 
 V_MAX = np.array([1.48, 1.48, 1.75, 1.31, 2.27, 2.36, 2.36])
 A_MAX = np.array([8.57, 8.57, 8.74, 11.36, 12.23, 15.72, 15.72])
@@ -189,6 +192,26 @@ def test_the_cycle_time_bound_is_a_lower_bound_of_the_run() -> None:
     _, task, sim = prepare(RunRequest())
     s = sim.run().summary()
     assert s["success"]
-    bound = cycle_time_bound(task.trajectory.keyframes, sim.dt, sim.log.q_cmd, sim.scene.v_max)
-    assert 0 < bound <= s["cycle_time_s"]
+    args = (task.trajectory.keyframes, sim.dt, sim.log.q_cmd, sim.scene.v_max)
+    bound, at_speed_limits = cycle_time_bound(*args), cycle_time_at_speed_limits(*args)
+    assert 0 < bound <= at_speed_limits <= s["cycle_time_s"]
     assert s["cycle_time_s"] == pytest.approx(task.trajectory.end_time)
+
+
+def test_at_the_speed_limits_the_tightest_joint_counts_step_by_step() -> None:
+    """Joint 0 leads the first half of a motion, joint 1 the second: the bound takes the
+    larger per-joint total (1.2 s), the speed-limited time each step's leader (2.0 s); an
+    in-place segment counts its own duration in both."""
+    X_a = SE3.from_translation(np.zeros(3))
+    X_b = SE3.from_translation(np.array([0.1, 0.0, 0.0]))
+    dt = 0.1
+    keyframes = [
+        Keyframe("start", 0.0, X_a, 0.0),
+        Keyframe("end", 2.0, X_b, 0.0),
+        Keyframe("hold", 2.5, X_b, 0.0),
+    ]
+    steps = np.array([[0.1, 0.02]] * 10 + [[0.02, 0.1]] * 10 + [[0.0, 0.0]] * 5)
+    q = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    v_max = np.ones(2)
+    assert cycle_time_bound(keyframes, dt, q, v_max) == pytest.approx(1.2 + 0.5)
+    assert cycle_time_at_speed_limits(keyframes, dt, q, v_max) == pytest.approx(2.0 + 0.5)
