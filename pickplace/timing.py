@@ -602,9 +602,7 @@ def _motion_time(
     |Δq| / v_max (ticks, joints) [s]."""
     total = 0.0
     for a, b in itertools.pairwise(keyframes):
-        dp = b.X_WG.translation() - a.X_WG.translation()
-        phi = rotation_log(b.X_WG.rotation() @ a.X_WG.rotation().inverse())
-        if float(np.linalg.norm(dp)) <= _STILL and float(np.linalg.norm(phi)) <= _STILL:
+        if not _moves(a, b):
             total += b.t - a.t
             continue
         k0, k1 = round(a.t / dt), min(round(b.t / dt), len(q) - 1)
