@@ -27,11 +27,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from pickplace.errors import OutputError, PickPlaceError
-from pickplace.robot import DEFAULT_ROBOT
+from pickplace.robot.registry import DEFAULT_ROBOT
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
 if TYPE_CHECKING:
-    from pickplace.runner import RunRequest
+    from pickplace.run.runner import RunRequest
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; other signals give 128 + their number
@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_vary(parser: argparse.ArgumentParser, how: str) -> None:
-    from pickplace.vary import valid_parameters
+    from pickplace.sim.vary import valid_parameters
 
     parser.add_argument(
         "--vary",
@@ -410,15 +410,15 @@ def _draw(texts: Sequence[str], seed: int) -> Any:
     """The parameters ``--vary`` draws for ``seed`` (None without ``--vary``)."""
     if not texts:
         return None
-    from pickplace.vary import parse_vary
+    from pickplace.sim.vary import parse_vary
 
     return parse_vary(texts).draw(seed)
 
 
 def _task_request(args: argparse.Namespace, **more: Any) -> RunRequest:
     """The run request of :func:`_add_task_options`' options, with ``more`` fields."""
-    from pickplace.runner import RunRequest
-    from pickplace.scenarios import BrickPlacement
+    from pickplace.run.runner import RunRequest
+    from pickplace.world.placements import BrickPlacement
 
     return RunRequest(
         scenario=args.scenario,
@@ -434,7 +434,7 @@ def _task_request(args: argparse.Namespace, **more: Any) -> RunRequest:
 
 
 def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.runner import execute
+    from pickplace.run.runner import execute
 
     progress = None if args.json else _progress(1.0, f"{args.scenario}")
     observers: list[Any] = [InterruptGate(stop)]
@@ -469,8 +469,8 @@ def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 
 def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.robot import resolve_description
-    from pickplace.runner import plan_report
+    from pickplace.robot.registry import resolve_description
+    from pickplace.run.runner import plan_report
 
     req = _task_request(args)
     report = plan_report(req)
@@ -519,7 +519,7 @@ def _human_plan(p: dict[str, Any]) -> str:
 
 
 def _cmd_scenarios(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.scenarios import SCENARIOS
+    from pickplace.sim.scenarios import SCENARIOS
 
     if args.json:
         _write_stdout(
@@ -535,7 +535,8 @@ def _cmd_scenarios(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 def robot_rows() -> list[dict[str, Any]]:
     """One row per bundled robot: name, arm joints, gripper, open width, squeeze, file."""
-    from pickplace.robot import ROBOTS_DIR, bundled_robots, load_robot
+    from pickplace.robot.compose import load_robot
+    from pickplace.robot.registry import ROBOTS_DIR, bundled_robots
 
     rows = []
     for name in bundled_robots():
@@ -572,10 +573,10 @@ def _cmd_robots(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.outfile import OutputFile
-    from pickplace.runner import validate_record_path
-    from pickplace.sweep import SweepRequest, given_and_compared, parse_compare, run_sweep
-    from pickplace.sweep_report import report_text
-    from pickplace.vary import parse_vary
+    from pickplace.run.runner import validate_record_path
+    from pickplace.sim.vary import parse_vary
+    from pickplace.sweep.report import report_text
+    from pickplace.sweep.sweep import SweepRequest, given_and_compared, parse_compare, run_sweep
 
     compare = parse_compare(args.compare) if args.compare else None
     for key, given in (("controller", args.controller), ("robot", args.robot)):
@@ -619,7 +620,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
                 progress.stop()
         record_error = None
         if output is not None:
-            from pickplace.sweep_recording import record_sweep
+            from pickplace.sweep.recording import record_sweep
 
             try:
                 report["recording"] = str(record_sweep(output, req, report))

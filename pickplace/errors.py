@@ -19,7 +19,7 @@ class InvalidInputError(PickPlaceError, ValueError):
     """A value given by the user or the caller is outside what is valid.
 
     Messages use the library's words (``control rate``, ``brick pose``); ``field`` names the
-    input they are about (e.g. ``"control_rate_hz"``, a :class:`~pickplace.runner.RunRequest`
+    input they are about (e.g. ``"control_rate_hz"``, a :class:`~pickplace.run.runner.RunRequest`
     field) so that a front end can say which of its options was wrong.
     """
 

@@ -1,6 +1,6 @@
 """Stop requests: SIGINT (Ctrl-C), SIGTERM and SIGHUP all stop a run the same way.
 
-:class:`Simulation.run <pickplace.sim.Simulation.run>` turns a :class:`KeyboardInterrupt`
+:class:`Simulation.run <pickplace.sim.loop.Simulation.run>` turns a :class:`KeyboardInterrupt`
 raised during the loop into the failure ``interrupted`` and still finishes the recording. This
 module makes the other stop signals (what ``timeout``, ``docker stop`` and CI cancellation send,
 or a closed terminal) do exactly that, and makes sure the interrupt only lands where it can be
@@ -13,7 +13,7 @@ handled:
 - Code inside :func:`deferred_interrupts` (sending a batch to the recording) is never cut in
   the middle: a signal there is delivered when the block ends.
 - Only the first signal is delivered; later ones are noted and ignored while the run finishes
-  (which is bounded: see ``pickplace.recording``).
+  (which is bounded: see ``pickplace.record.recording``).
 
 The exit code of a stopped process is ``128 + signal number``: 130 for SIGINT, 143 for
 SIGTERM, 129 for SIGHUP. Without an installed handler (library use) nothing changes: Python

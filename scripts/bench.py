@@ -38,16 +38,17 @@ import mink
 import mujoco
 import numpy as np
 
-from pickplace.controllers import QPController, make_controller
+from pickplace.control.controllers import QPController, make_controller
 from pickplace.errors import InvalidInputError
 from pickplace.geometry import pose_error_W
-from pickplace.loader import clear_scene_cache, load_scene
-from pickplace.planner import PickPlacePlanner
-from pickplace.robot import bundled_robots, clear_calibration_cache
-from pickplace.runner import RunRequest, prepare
-from pickplace.scenarios import brick_on_floor, random_placement, target_placement
-from pickplace.sweep import SweepRequest, run_sweep
-from pickplace.timing import cycle_time_at_speed_limits, cycle_time_bound
+from pickplace.planning.planner import PickPlacePlanner
+from pickplace.planning.timing import cycle_time_at_speed_limits, cycle_time_bound
+from pickplace.robot.compose import clear_calibration_cache
+from pickplace.robot.registry import bundled_robots
+from pickplace.run.runner import RunRequest, prepare
+from pickplace.sim.loader import clear_scene_cache, load_scene
+from pickplace.sweep.sweep import SweepRequest, run_sweep
+from pickplace.world.placements import brick_on_floor, random_placement, target_placement
 
 TARGETS = {
     "ik_tick_ratio_vs_mink": ("<=", 0.5),
@@ -68,7 +69,7 @@ COMPOSE_TARGET_S = 1.0
 # The peak-RSS sweep runs in a process of its own, so that nothing of the benchmark's counts.
 RSS_SCRIPT = """
 import json, resource, sys
-from pickplace.sweep import SweepRequest, run_sweep
+from pickplace.sweep.sweep import SweepRequest, run_sweep
 report = run_sweep(SweepRequest("pick-place-random", "qp", int(sys.argv[1]), 0, 2))
 records = report["trial_results"]
 print(json.dumps({

@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 from rerun.chunk import RrdReader
 
-from pickplace.recording import build_blueprint
-from pickplace.runner import RunRequest, prepare
-from pickplace.sim import Simulation
+from pickplace.record.recording import build_blueprint
+from pickplace.run.runner import RunRequest, prepare
+from pickplace.sim.loop import Simulation
 from scripts.golden_summaries import first_difference
 
 PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "golden_recording.json"

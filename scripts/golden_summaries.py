@@ -1,7 +1,7 @@
 """Record (or check) the JSON summaries that a behaviour-preserving change must not alter.
 
 The file ``tests/data/golden_summaries.json`` holds one summary per case, without the fields
-that measure wall-clock time (``pickplace.verdict.WALL_TIME_FIELDS``). ``tests/test_golden.py``
+that measure wall-clock time (``pickplace.sim.verdict.WALL_TIME_FIELDS``). ``tests/test_golden.py``
 re-runs every case and compares. A change that alters behaviour on purpose (a new plan, new
 timing, a new robot) regenerates the file deliberately with
 
@@ -23,9 +23,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from pickplace.runner import RunRequest, run
-from pickplace.scenarios import SCENARIOS
-from pickplace.verdict import WALL_TIME_FIELDS
+from pickplace.run.runner import RunRequest, run
+from pickplace.sim.scenarios import SCENARIOS
+from pickplace.sim.verdict import WALL_TIME_FIELDS
 
 PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "golden_summaries.json"
 

@@ -1,7 +1,7 @@
 """How long composing and calibrating each robot takes (target: ≤ 1 s per robot, cold).
 
 Prints, per bundled robot (or per description given on the command line), the wall time of
-:func:`pickplace.robot.load_robot` with an empty calibration cache ("cold") and again with
+:func:`pickplace.robot.compose.load_robot` with an empty calibration cache ("cold") and again with
 the calibration cached ("cached"), and the simulated time calibration took. Timings are of
 this machine at this moment: compare them with each other, not across machines.
 
@@ -16,7 +16,8 @@ import sys
 import time
 from typing import Any
 
-from pickplace.robot import bundled_robots, clear_calibration_cache, load_robot
+from pickplace.robot.compose import clear_calibration_cache, load_robot
+from pickplace.robot.registry import bundled_robots
 
 TARGET_S = 1.0
 

@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 
-from pickplace.loader import load_scene
-from pickplace.scene import Scene
+from pickplace.sim.loader import load_scene
+from pickplace.world.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent
 

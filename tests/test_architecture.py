@@ -54,14 +54,14 @@ def test_no_private_attribute_of_another_object_is_used(path: Path) -> None:
 def test_the_scan_sees_foreign_privates_and_allows_own_ones() -> None:
     source = """
 from mink.lie import _lie_ops_c
-from pickplace.scene import Scene, _helper
+from pickplace.world.scene import Scene, _helper
 task._error_and_jacobian(cfg)
 self.task._cache
 x = self._mine + cls._also_mine + self.__class__.__name__ + obj.__dict__
 """
     assert private_uses(source) == [
         "2: from mink.lie import _lie_ops_c",
-        "3: from pickplace.scene import _helper",
+        "3: from pickplace.world.scene import _helper",
         "4: task._error_and_jacobian",
         "5: self.task._cache",
     ]

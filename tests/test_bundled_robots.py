@@ -18,16 +18,22 @@ import numpy as np
 import pytest
 from mink.lie import SE3
 
-from pickplace.grasp import GRASP_OPEN_WIDTH, top_down_rotation, yaw_of
-from pickplace.gripper_calibration import ACTION_HOLD, GRIP_FORCE_SHARE, RELEASE_CLEARANCE
-from pickplace.kinematics import ArmKinematics
-from pickplace.loader import choose_home, load_scene
-from pickplace.plan import PlanConfig
-from pickplace.robot import DEFAULT_ROBOT, bundled_robots
-from pickplace.runner import RunRequest, prepare, run
-from pickplace.scenarios import REACH_OVERSHOOT, SCENARIOS, full_stretch_distance
-from pickplace.scene import Scene
-from pickplace.sweep import SweepRequest, run_sweep
+from pickplace.control.kinematics import ArmKinematics
+from pickplace.planning.grasp import top_down_rotation, yaw_of
+from pickplace.planning.home import choose_home
+from pickplace.planning.plan import PlanConfig
+from pickplace.robot.calibration import (
+    ACTION_HOLD,
+    GRASP_OPEN_WIDTH,
+    GRIP_FORCE_SHARE,
+    RELEASE_CLEARANCE,
+)
+from pickplace.robot.registry import DEFAULT_ROBOT, bundled_robots
+from pickplace.run.runner import RunRequest, prepare, run
+from pickplace.sim.loader import load_scene
+from pickplace.sim.scenarios import REACH_OVERSHOOT, SCENARIOS, full_stretch_distance
+from pickplace.sweep.sweep import SweepRequest, run_sweep
+from pickplace.world.scene import Scene
 from tests.toy_robot import write_toy_robot
 
 ROBOTS = bundled_robots()

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from pickplace import checks
-from pickplace.checks import (
+from pickplace.control.controllers import IK_STATUSES
+from pickplace.run.runner import RunRequest, prepare
+from pickplace.sim import checks
+from pickplace.sim.checks import (
     PLACE_CHECKS,
     REACH_CHECKS,
     Check,
@@ -23,10 +25,8 @@ from pickplace.checks import (
     SuccessCriteria,
     TrackingCheck,
 )
-from pickplace.controllers import IK_STATUSES
-from pickplace.runner import RunRequest, prepare
-from pickplace.scene import Scene
-from pickplace.ticklog import CONTROLLER_NONFINITE, STATE_NONFINITE, TickLog
+from pickplace.sim.ticklog import CONTROLLER_NONFINITE, STATE_NONFINITE, TickLog
+from pickplace.world.scene import Scene
 
 DT = 0.01
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pickplace.scenarios import SCENARIOS
+from pickplace.sim.scenarios import SCENARIOS
 from tests.conftest import REPO, run_cli, run_cli_json
 from tests.toy_robot import BAD_CASES, write_toy_robot
 

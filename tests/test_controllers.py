@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from mink.lie import SE3, SO3
 
-from pickplace.controllers import (
+from pickplace.control.controllers import (
     DLSController,
     IKStatus,
     PinvController,
     QPController,
     make_controller,
 )
+from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import UnknownNameError
-from pickplace.kinematics import ArmKinematics
 
 DT = 0.01
 

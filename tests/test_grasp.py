@@ -9,8 +9,7 @@ import pytest
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError
-from pickplace.grasp import (
-    brick_pose,
+from pickplace.planning.grasp import (
     choose_grasp,
     choose_place_pose,
     top_down_grasps,
@@ -18,6 +17,7 @@ from pickplace.grasp import (
     wrap_angle,
     yaw_of,
 )
+from pickplace.world.placements import brick_pose
 
 BRICK_YAWS = np.linspace(-math.pi, math.pi, 721)
 GRIPPER_YAWS = (-3.0, -math.pi / 2, -0.4, 0.0, 1.0, math.pi / 2, 2.9, math.pi)

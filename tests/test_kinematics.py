@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from mink.lie import SO3
 
-from pickplace.diagnostics import Manipulability, holding_torques, jacobian_health
-from pickplace.kinematics import ArmKinematics
+from pickplace.control.diagnostics import Manipulability, holding_torques, jacobian_health
+from pickplace.control.kinematics import ArmKinematics
 
 
 def _random_q(scene, rng: np.random.Generator) -> np.ndarray:
@@ -100,7 +100,7 @@ def test_holding_torques_equal_mujocos_generalized_force_of_the_weight(scene) ->
 def test_logged_ellipsoid_axes_diagonalise_the_translational_velocity_ellipsoid() -> None:
     """Per tick the loop stores U_t (columns = axes) and its quaternion: one proper rotation
     with J_v J_vᵀ = U_t diag(σ_t²) U_tᵀ."""
-    from pickplace.runner import RunRequest, prepare
+    from pickplace.run.runner import RunRequest, prepare
 
     _, _, sim = prepare(RunRequest())
     sim.advance(300)

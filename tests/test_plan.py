@@ -11,8 +11,8 @@ from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError, UnknownNameError
 from pickplace.geometry import rotation_angle
-from pickplace.grasp import brick_pose, choose_grasp, top_down_rotation
-from pickplace.plan import (
+from pickplace.planning.grasp import choose_grasp, top_down_rotation
+from pickplace.planning.plan import (
     Phases,
     PlanConfig,
     Waypoint,
@@ -20,7 +20,8 @@ from pickplace.plan import (
     segment_duration,
     time_keyframes,
 )
-from pickplace.trajectory import Keyframe
+from pickplace.planning.trajectory import Keyframe
+from pickplace.world.placements import brick_pose
 
 NAMES = [
     "initial",

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 from mink.lie import SE3
 
-from pickplace.checks import FailureReason
 from pickplace.geometry import rotation_angle
-from pickplace.grasp import brick_width_across, yaw_of
-from pickplace.plan import PlanConfig, plan_pick_place, swung_pose
-from pickplace.planner import PickPlacePlanner
-from pickplace.runner import RunRequest, prepare
-from pickplace.scenarios import BrickPlacement, brick_on_floor, target_placement
-from pickplace.scene import Scene
-from pickplace.task import World
+from pickplace.planning.grasp import brick_width_across, yaw_of
+from pickplace.planning.plan import PlanConfig, plan_pick_place, swung_pose
+from pickplace.planning.planner import PickPlacePlanner
+from pickplace.run.runner import RunRequest, prepare
+from pickplace.sim.checks import FailureReason
+from pickplace.sim.task import World
+from pickplace.world.placements import BrickPlacement, brick_on_floor, target_placement
+from pickplace.world.scene import Scene
 from tests.conftest import run_cli
 
 # A corner of bin 1 where no grasp fits: 60 mm from two walls, turned 45°.

@@ -9,11 +9,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from pickplace.planner import PickPlacePlanner
-from pickplace.preflight import Preflight, PreflightConfig, collision_model
-from pickplace.runner import RunRequest, prepare
-from pickplace.scenarios import BrickPlacement, brick_on_floor, target_placement
-from pickplace.scene import Scene
+from pickplace.planning.planner import PickPlacePlanner
+from pickplace.planning.preflight import Preflight, PreflightConfig, collision_model
+from pickplace.run.runner import RunRequest, prepare
+from pickplace.world.placements import BrickPlacement, brick_on_floor, target_placement
+from pickplace.world.scene import Scene
 
 
 def _bin1(scene: Scene, x_B: float, y_B: float, yaw: float) -> BrickPlacement:
@@ -92,8 +92,8 @@ def test_a_palm_over_a_wall_is_refused_and_the_run_would_have_hit_it(scene: Scen
     assert "bin1_wall" in first.preflight.problem.text
     _, task, sim = prepare(RunRequest())
     task = type(task)(task.scenario, 0, task.goal, first.plan, X_pick, faults=(), planning=None)
-    from pickplace.controllers import make_controller
-    from pickplace.sim import Simulation
+    from pickplace.control.controllers import make_controller
+    from pickplace.sim.loop import Simulation
 
     result = Simulation(sim.scene, task, make_controller("qp", sim.scene, sim.dt)).run()
     assert result.failure is not None and result.failure.value == "collision"
@@ -126,7 +126,7 @@ def test_the_held_brick_is_checked_and_its_supports_are_not(scene: Scene) -> Non
 def test_a_wrist_wound_into_its_limit_is_refused(scene: Scene) -> None:
     """The class-Y failure: with the via-point on the shortest arc the wrist turns against the
     base swing into joint 7's limit; the pre-flight names the joint and the limit."""
-    from pickplace.plan import PlanConfig, plan_pick_place
+    from pickplace.planning.plan import PlanConfig, plan_pick_place
 
     planner = PickPlacePlanner(scene, "qp")
     X_pick, X_place = _poses(scene, _bin1(scene, -0.121, 0.002, -0.212))

@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from pickplace.sweep import SweepRequest, run_sweep
+from pickplace.sweep.sweep import SweepRequest, run_sweep
 
 SEEDS = 300
 # What the pre-flight checks: a run whose pre-flight passed must not fail for these.

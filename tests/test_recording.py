@@ -14,14 +14,14 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from pickplace.checks import FailureReason
-from pickplace.controllers import make_controller
+from pickplace.control.controllers import make_controller
 from pickplace.errors import InvalidInputError, OutputError, RecordingError
-from pickplace.loader import load_scene
-from pickplace.recording import Recorder
-from pickplace.scenarios import BuildRequest, get_scenario
-from pickplace.scene import Scene
-from pickplace.sim import RunResult, Simulation
+from pickplace.record.recording import Recorder
+from pickplace.sim.checks import FailureReason
+from pickplace.sim.loader import load_scene
+from pickplace.sim.loop import RunResult, Simulation
+from pickplace.sim.scenarios import BuildRequest, get_scenario
+from pickplace.world.scene import Scene
 from scripts.golden_recording import read_columns
 
 RECORDING_ID = "pick-place/qp/seed-0"
@@ -105,7 +105,7 @@ def test_application_and_recording_id(recording: Recording) -> None:
 
 def test_a_run_s_recording_id_names_its_robot(tmp_path: Path) -> None:
     """Two runs that differ only in the robot must not merge in one viewer."""
-    from pickplace.runner import RunRequest, run
+    from pickplace.run.runner import RunRequest, run
 
     ids = set()
     for robot in ("iiwa14-wsg50", "panda-hand"):

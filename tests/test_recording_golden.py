@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from pickplace.recording import build_blueprint
-from pickplace.scene import Scene
-from pickplace.sim import Simulation
-from pickplace.ticklog import TickLog
+from pickplace.record.recording import build_blueprint
+from pickplace.sim.loop import Simulation
+from pickplace.sim.ticklog import TickLog
+from pickplace.world.scene import Scene
 from scripts.golden_recording import (
     PATH,
     describe_blueprint,

@@ -11,9 +11,9 @@ import pytest
 import rerun.blueprint as rrb
 
 from pickplace.errors import InvalidInputError
-from pickplace.recording import LIMIT_LINES, PLOTS, LimitLines, Plot, build_blueprint
-from pickplace.scene import Scene
-from pickplace.ticklog import TickLog
+from pickplace.record.recording import LIMIT_LINES, PLOTS, LimitLines, Plot, build_blueprint
+from pickplace.sim.ticklog import TickLog
+from pickplace.world.scene import Scene
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 TABLE_PATHS = [s.path for s in (*PLOTS, *LIMIT_LINES)]

@@ -16,23 +16,16 @@ import numpy as np
 import pytest
 
 from pickplace.errors import PickPlaceError, RobotError
-from pickplace.robot import (
-    ARM_PREFIX,
-    BRICK_GEOM,
-    DEFAULT_ROBOT,
-    HOME_TOOL_SITE,
-    Composition,
-    bundled_robots,
-    load_robot,
-)
-from pickplace.robot_description import RobotDescription
-from pickplace.robot_physics import (
+from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, HOME_TOOL_SITE, Composition, load_robot
+from pickplace.robot.description import RobotDescription
+from pickplace.robot.physics import (
     GRIPPER_MIN_ARMATURE,
     GRIPPER_MIN_DAMPING,
     ROBOT_CONAFFINITY,
     ROBOT_CONTYPE,
     arm_min_armature,
 )
+from pickplace.robot.registry import DEFAULT_ROBOT, bundled_robots
 from tests.toy_robot import (
     BAD_CASES,
     TOY_GRIPPER,

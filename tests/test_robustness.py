@@ -26,8 +26,7 @@ from typing import Any
 
 import pytest
 
-from pickplace.runner import valid_control_rates
-from pickplace.viewer import (
+from pickplace.record.viewer import (
     CONNECT_TIMEOUT_S,
     HEALTH_FAILURES,
     HEALTH_PERIOD_S,
@@ -35,6 +34,7 @@ from pickplace.viewer import (
     ViewerAddress,
     viewer_problem,
 )
+from pickplace.run.runner import valid_control_rates
 from tests.conftest import REPO
 
 OLD = b"an older recording that must survive\n"
@@ -579,7 +579,7 @@ def test_8_a_robot_file_cannot_change_the_world_timestep(tmp_path: Path) -> None
     assert code == 0, err
     assert err == "" and one_json(out)["feasible"]
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
-    from pickplace.loader import load_scene
+    from pickplace.sim.loader import load_scene
 
     scene = load_scene(robot=str(robot))
     assert scene.model.opt.timestep == 0.002  # the world's

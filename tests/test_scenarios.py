@@ -8,11 +8,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from pickplace.checks import FAILURE_REASONS
-from pickplace.runner import RunRequest, prepare
-from pickplace.scenarios import SCENARIOS
-from pickplace.sim import Simulation
-from pickplace.verdict import WALL_TIME_FIELDS
+from pickplace.run.runner import RunRequest, prepare
+from pickplace.sim.checks import FAILURE_REASONS
+from pickplace.sim.loop import Simulation
+from pickplace.sim.scenarios import SCENARIOS
+from pickplace.sim.verdict import WALL_TIME_FIELDS
 
 # Slip budget in the gripper frame during transport (issue 4): 3 mm.
 MAX_SLIP = 0.003

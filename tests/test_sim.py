@@ -8,13 +8,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from pickplace.controllers import make_controller
+from pickplace.control.controllers import make_controller
 from pickplace.errors import InvalidInputError
-from pickplace.loader import load_scene
-from pickplace.runner import RunRequest, prepare
-from pickplace.scenarios import BuildRequest, get_scenario
-from pickplace.sim import Simulation
-from pickplace.verdict import WALL_TIME_FIELDS
+from pickplace.run.runner import RunRequest, prepare
+from pickplace.sim.loader import load_scene
+from pickplace.sim.loop import Simulation
+from pickplace.sim.scenarios import BuildRequest, get_scenario
+from pickplace.sim.verdict import WALL_TIME_FIELDS
 
 
 def _summary(sim: Simulation) -> dict[str, Any]:

@@ -10,7 +10,7 @@ import pytest
 from scipy import stats as sps
 
 from pickplace.errors import InvalidInputError
-from pickplace.stats import (
+from pickplace.sweep.stats import (
     compare_paired,
     mcnemar_exact_p,
     newcombe_paired_interval,

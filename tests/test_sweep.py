@@ -12,17 +12,17 @@ import pytest
 
 from pickplace.errors import InvalidInputError
 from pickplace.outfile import OutputFile
-from pickplace.stats import compare_paired
-from pickplace.sweep import (
+from pickplace.sim.vary import parse_vary
+from pickplace.sweep.recording import record_sweep
+from pickplace.sweep.report import report_text
+from pickplace.sweep.stats import compare_paired
+from pickplace.sweep.sweep import (
     SWEEP_WALL_TIME_FIELDS,
     SweepRequest,
     compact_summary,
     parse_compare,
     run_sweep,
 )
-from pickplace.sweep_recording import record_sweep
-from pickplace.sweep_report import report_text
-from pickplace.vary import parse_vary
 from tests.conftest import REPO, run_cli, run_cli_json
 from tests.test_recording import read_entities
 

@@ -17,8 +17,8 @@ from typing import Any
 
 import pytest
 
-from pickplace.sweep import SWEEP_WALL_TIME_FIELDS, SweepRequest, run_sweep
-from pickplace.vary import parse_vary
+from pickplace.sim.vary import parse_vary
+from pickplace.sweep.sweep import SWEEP_WALL_TIME_FIELDS, SweepRequest, run_sweep
 from tests.conftest import REPO
 
 pytest.importorskip("ray")

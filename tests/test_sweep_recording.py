@@ -11,11 +11,9 @@ import pytest
 from rerun.chunk import RrdReader
 
 from pickplace.errors import InvalidInputError, RecordingError
-from pickplace.scenarios import random_placement
-from pickplace.scene import Scene
-from pickplace.stats import wilson_interval
-from pickplace.sweep import SweepRequest, run_sweep, sweep_report
-from pickplace.sweep_recording import (
+from pickplace.sim.vary import ParameterDraw, VaryPlan, parse_vary
+from pickplace.sweep.bins import success_by_parameter
+from pickplace.sweep.recording import (
     CHART_HEIGHT,
     METRICS,
     SUCCESS_COLOR,
@@ -24,7 +22,10 @@ from pickplace.sweep_recording import (
     report_markdown,
     write_sweep_recording,
 )
-from pickplace.vary import ParameterDraw, VaryPlan, parse_vary, success_by_parameter
+from pickplace.sweep.stats import wilson_interval
+from pickplace.sweep.sweep import SweepRequest, run_sweep, sweep_report
+from pickplace.world.placements import random_placement
+from pickplace.world.scene import Scene
 from tests.test_recording import Entity, read_entities
 
 HEAVY_KG = 8.0  # the made-up outcome rule of the synthetic sweep: heavier bricks drop

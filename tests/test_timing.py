@@ -11,9 +11,8 @@ import pytest
 from mink.lie import SE3
 
 from pickplace.errors import InvalidInputError, PlanError
-from pickplace.plan import PlanConfig
-from pickplace.runner import RunRequest, prepare
-from pickplace.timing import (
+from pickplace.planning.plan import PlanConfig
+from pickplace.planning.timing import (
     GRAVITY_W,
     SegmentLimits,
     TimingConfig,
@@ -24,7 +23,8 @@ from pickplace.timing import (
     slip_box,
     time_optimal_law,
 )
-from pickplace.trajectory import Keyframe
+from pickplace.planning.trajectory import Keyframe
+from pickplace.run.runner import RunRequest, prepare
 
 V_MAX = np.array([1.48, 1.48, 1.75, 1.31, 2.27, 2.36, 2.36])
 A_MAX = np.array([8.57, 8.57, 8.74, 11.36, 12.23, 15.72, 15.72])

@@ -12,9 +12,9 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from pickplace.errors import PlanError, UnknownNameError
 from pickplace.geometry import rotation_log, slerp
-from pickplace.grasp import brick_pose, top_down_rotation
-from pickplace.plan import PlanConfig, plan_pick_place
-from pickplace.trajectory import (
+from pickplace.planning.grasp import top_down_rotation
+from pickplace.planning.plan import PlanConfig, plan_pick_place
+from pickplace.planning.trajectory import (
     PROFILES,
     Keyframe,
     LinearProfile,
@@ -24,6 +24,7 @@ from pickplace.trajectory import (
     SineProfile,
     profile_by_name,
 )
+from pickplace.world.placements import brick_pose
 
 
 def pose_at(traj: PoseTrajectory, t: float) -> SE3:

@@ -10,13 +10,13 @@ import pytest
 
 from pickplace.errors import InvalidInputError
 from pickplace.geometry import box_corners, transform_points
-from pickplace.loader import load_scene
-from pickplace.planner import PickPlacePlanner
-from pickplace.runner import RunRequest, build_task, prepare, run
-from pickplace.scenarios import brick_on_floor, nominal_placement
-from pickplace.scene import Scene
-from pickplace.variation import apply_to_scene, brick_offset_W
-from pickplace.vary import ParameterDraw, parse_vary
+from pickplace.planning.planner import PickPlacePlanner
+from pickplace.run.runner import RunRequest, build_task, prepare, run
+from pickplace.sim.loader import load_scene
+from pickplace.sim.variation import apply_to_scene, brick_offset_W
+from pickplace.sim.vary import ParameterDraw, parse_vary
+from pickplace.world.placements import brick_on_floor, nominal_placement
+from pickplace.world.scene import Scene
 from tests.conftest import run_cli_json
 
 G = 9.81

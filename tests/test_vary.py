@@ -9,19 +9,17 @@ import pytest
 from scipy import stats as sps
 
 from pickplace.errors import InvalidInputError, PickPlaceError
-from pickplace.runner import CONTROL_RATE_RANGE_HZ
-from pickplace.stats import wilson_interval
-from pickplace.vary import (
+from pickplace.run.runner import CONTROL_RATE_RANGE_HZ
+from pickplace.sim.vary import (
     PARAMETERS,
     ParameterDraw,
     VaryPlan,
-    default_bin_count,
     get_parameter,
     parse_spec,
     parse_vary,
-    success_by_bin,
-    success_by_parameter,
 )
+from pickplace.sweep.bins import default_bin_count, success_by_bin, success_by_parameter
+from pickplace.sweep.stats import wilson_interval
 
 REQUIRED = ("brick_mass", "brick_size", "friction", "grip_force", "pose_noise", "speed")
 

@@ -1,0 +1,1 @@
+"""A run recorded to Rerun: the recording with its blueprint, and the live viewer connection."""

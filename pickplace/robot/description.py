@@ -1,0 +1,406 @@
+"""A robot description: the TOML file a user writes to bring an arm and a gripper.
+
+The file names an arm MJCF file, the body or site where the gripper goes (the flange), the arm's
+joint speed limits (no published MJCF file carries them) and optionally its acceleration limits
+and home posture; and a gripper MJCF file with its placement on the flange. Everything else the
+pipeline needs is read from the files or measured in simulation (``pickplace.robot.compose``)::
+
+    name = "my-arm"                    # shown in summaries and recordings
+    [arm]
+    mjcf = "arm.xml"                   # path relative to this file
+    flange = "hand_mount"              # body or site where the gripper goes
+    speed_limits = [2.1, 2.1, 2.1, 2.1, 2.6, 2.6, 2.6]   # rad/s, one per arm joint (required)
+    accel_limits = [15, 7.5, 10, 12.5, 15, 20, 20]       # rad/s², optional
+    home = [0, 0.3, 0, -1.8, 0, 2.1, 0.8]                # rad, optional (else found by IK)
+    angle = "radian"                   # optional: units of a file without <compiler angle>
+    [gripper]
+    mjcf = "gripper.xml"
+    mount_pos = [0, 0, 0]              # optional placement on the flange [m]
+    mount_quat = [1, 0, 0, 0]          # optional, wxyz
+    angle = "radian"
+    # optional overrides of what calibration finds:
+    pads = [["left_pad"], ["right_pad"]]      # pad geoms of each finger (gripper file names)
+    tcp = "grip_site"                         # a site of the gripper file, or
+    # tcp = { pos = [0, 0, 0.1], quat = [1, 0, 0, 0] }   # in the gripper's root body frame
+    open_command = [0.08]                     # one value per gripper actuator (file order)
+    closed_command = [0.0]
+    grip_force = 40.0                         # squeeze per jaw [N]
+    couple_fingers = true                     # couple independent fingers (default true)
+
+Every bad field raises :class:`~pickplace.errors.RobotError` with one line naming the file, the
+field and what would be valid. Lengths that depend on the arm (one speed limit per arm joint)
+are checked when the robot is composed (``pickplace.robot.compose``), with the same kind of message.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pickplace.errors import RobotError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+ANGLE_UNITS = ("radian", "degree")
+"""Valid values of the ``angle`` fields."""
+
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+"""A robot name: letters, digits, '.', '_' and '-' (it appears in recording paths)."""
+
+_TOP_KEYS = ("name", "arm", "gripper")
+_ARM_KEYS = ("mjcf", "flange", "speed_limits", "accel_limits", "home", "angle")
+_GRIPPER_KEYS = (
+    "mjcf",
+    "mount_pos",
+    "mount_quat",
+    "angle",
+    "pads",
+    "tcp",
+    "open_command",
+    "closed_command",
+    "grip_force",
+    "couple_fingers",
+)
+_TCP_KEYS = ("pos", "quat")
+
+
+def _fail(source: Path, field_name: str, problem: str) -> RobotError:
+    return RobotError(f"{source}: {field_name}: {problem}")
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _numbers(
+    source: Path, field_name: str, value: object, length: int | None = None, what: str = ""
+) -> tuple[float, ...]:
+    """A list of finite numbers (of ``length`` if given)."""
+    shape = f"a list of {length} numbers" if length is not None else "a list of numbers"
+    unit = f" {what}" if what else ""
+    if not isinstance(value, list) or not all(_is_number(v) for v in value):
+        raise _fail(source, field_name, f"must be {shape}{unit}, got {value!r}")
+    numbers = tuple(float(v) for v in value)
+    if not all(math.isfinite(v) for v in numbers):
+        raise _fail(source, field_name, f"must be {shape}{unit}, all finite, got {value!r}")
+    if length is not None and len(numbers) != length:
+        raise _fail(source, field_name, f"must be {shape}{unit}, got {len(numbers)}: {value!r}")
+    if not numbers:
+        raise _fail(source, field_name, f"must be a non-empty list of numbers{unit}, got []")
+    return numbers
+
+
+def _check_keys(
+    source: Path, section: str, table: Mapping[str, Any], valid: tuple[str, ...]
+) -> None:
+    for key in table:
+        if key not in valid:
+            where = f"[{section}] {key}" if section else key
+            raise _fail(source, where, f"unknown field; valid: {', '.join(valid)}")
+
+
+def _angle(source: Path, field_name: str, value: object) -> str | None:
+    if value is None:
+        return None
+    if value not in ANGLE_UNITS:
+        raise _fail(source, field_name, f"must be one of {', '.join(ANGLE_UNITS)}, got {value!r}")
+    return str(value)
+
+
+def _mjcf_path(source: Path, field_name: str, value: object) -> Path:
+    if not isinstance(value, str) or not value:
+        raise _fail(source, field_name, f"must be a path to an MJCF file, got {value!r}")
+    path = Path(value)
+    path = (source.parent / path).resolve() if not path.is_absolute() else path
+    if not path.is_file():
+        raise _fail(
+            source,
+            field_name,
+            f"file '{path}' does not exist; valid: an MJCF file path relative to '{source.parent}'",
+        )
+    return path
+
+
+def check_speed_limits(source: Path, limits: tuple[float, ...], joints: tuple[str, ...]) -> None:
+    """Raise unless there is one positive speed limit per arm joint.
+
+    Args:
+        source: The description file (for the message).
+        limits: The ``[arm] speed_limits`` values [rad/s].
+        joints: The arm's joints, root to flange.
+    """
+    _check_per_joint(source, "[arm] speed_limits", limits, joints, "rad/s", positive=True)
+
+
+def _check_per_joint(
+    source: Path,
+    field_name: str,
+    values: tuple[float, ...],
+    joints: tuple[str, ...],
+    unit: str,
+    positive: bool,
+) -> None:
+    kind = "positive numbers" if positive else "numbers"
+    valid = f"{len(joints)} {kind} [{unit}], one per arm joint ({', '.join(joints)})"
+    if len(values) != len(joints):
+        raise _fail(source, field_name, f"has {len(values)} values; valid: {valid}")
+    if positive and any(v <= 0 for v in values):
+        raise _fail(source, field_name, f"{list(values)} is not all > 0; valid: {valid}")
+
+
+def check_per_joint(
+    source: Path, field_name: str, values: tuple[float, ...], joints: tuple[str, ...], unit: str
+) -> None:
+    """Raise unless ``values`` has one number per arm joint (any sign)."""
+    _check_per_joint(source, field_name, values, joints, unit, positive=False)
+
+
+@dataclass(frozen=True)
+class TcpOverride:
+    """A tool point given instead of calibrated: a site of the gripper file, or a pose.
+
+    Attributes:
+        site: Name of a site in the gripper file whose frame is the tool frame, or None.
+        pos: Position in the gripper's root body frame [m] (when ``site`` is None).
+        quat: Orientation wxyz in the gripper's root body frame (when ``site`` is None).
+    """
+
+    site: str | None = None
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class ArmDescription:
+    """The ``[arm]`` table.
+
+    Attributes:
+        mjcf: The arm's MJCF file (resolved).
+        flange: Body or site of the arm file where the gripper goes.
+        speed_limits: Joint speed limits [rad/s], one per arm joint, root to flange.
+        accel_limits: Joint acceleration limits [rad/s²], or None.
+        home: Home posture [rad], or None (then found by IK).
+        angle: Units of a file without ``<compiler angle>``, or None.
+    """
+
+    mjcf: Path
+    flange: str
+    speed_limits: tuple[float, ...]
+    accel_limits: tuple[float, ...] | None = None
+    home: tuple[float, ...] | None = None
+    angle: str | None = None
+
+
+@dataclass(frozen=True)
+class GripperDescription:
+    """The ``[gripper]`` table.
+
+    Attributes:
+        mjcf: The gripper's MJCF file (resolved).
+        mount_pos: Position of the gripper's root frame on the flange [m].
+        mount_quat: Orientation (wxyz, unit) of the gripper's root frame on the flange.
+        angle: Units of a file without ``<compiler angle>``, or None.
+        pads: Pad geoms of each finger (names in the gripper file), or None (calibrated).
+        tcp: Tool point, or None (calibrated).
+        open_command: Open command, one value per actuator of the gripper file, or None.
+        closed_command: Closed command, likewise, or None.
+        grip_force: Squeeze per jaw [N] to judge grasps against, or None (measured).
+        couple_fingers: Couple independently actuated fingers (tendon + joint equality).
+    """
+
+    mjcf: Path
+    mount_pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mount_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    angle: str | None = None
+    pads: tuple[tuple[str, ...], tuple[str, ...]] | None = None
+    tcp: TcpOverride | None = None
+    open_command: tuple[float, ...] | None = None
+    closed_command: tuple[float, ...] | None = None
+    grip_force: float | None = None
+    couple_fingers: bool = True
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """A robot: an arm, a gripper on its flange, and the data no MJCF file carries.
+
+    Attributes:
+        source: The description file (named in every error message).
+        name: Robot name (letters, digits, '.', '_', '-').
+        arm: The ``[arm]`` table.
+        gripper: The ``[gripper]`` table.
+    """
+
+    source: Path
+    name: str
+    arm: ArmDescription
+    gripper: GripperDescription = field(repr=False)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> RobotDescription:
+        """Read and validate a description file.
+
+        Raises:
+            RobotError: The file is missing or not TOML, or a field is missing or invalid;
+                one line naming the file, the field and what would be valid.
+        """
+        source = Path(path).resolve()
+        if not source.is_file():
+            raise RobotError(
+                f"{source}: robot description does not exist; valid: a TOML file with "
+                f"name, [arm] and [gripper] (see README 'Your own robot')"
+            )
+        try:
+            table = tomllib.loads(source.read_text(encoding="utf-8"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            detail = " ".join(str(exc).split())
+            raise RobotError(f"{source}: not valid TOML: {detail}") from exc
+        return cls.from_mapping(table, source)
+
+    @classmethod
+    def from_mapping(cls, table: Mapping[str, Any], source: Path) -> RobotDescription:
+        """Validate a parsed description (``source`` is named in errors and anchors paths)."""
+        _check_keys(source, "", table, _TOP_KEYS)
+        name = table.get("name")
+        if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
+            raise _fail(
+                source,
+                "name",
+                f"must be letters, digits, '.', '_' or '-' (not starting with a symbol), "
+                f"got {name!r}",
+            )
+        for section in ("arm", "gripper"):
+            if not isinstance(table.get(section), dict):
+                raise _fail(source, f"[{section}]", "missing table; valid: see README")
+        return cls(
+            source=source,
+            name=name,
+            arm=_parse_arm(source, table["arm"]),
+            gripper=_parse_gripper(source, table["gripper"]),
+        )
+
+
+def _parse_arm(source: Path, t: Mapping[str, Any]) -> ArmDescription:
+    _check_keys(source, "arm", t, _ARM_KEYS)
+    for key in ("mjcf", "flange", "speed_limits"):
+        if key not in t:
+            raise _fail(source, f"[arm] {key}", "missing (required)")
+    flange = t["flange"]
+    if not isinstance(flange, str) or not flange:
+        raise _fail(source, "[arm] flange", f"must be a body or site name, got {flange!r}")
+    speed = _numbers(source, "[arm] speed_limits", t["speed_limits"], what="[rad/s]")
+    if any(v <= 0 for v in speed):
+        raise _fail(
+            source, "[arm] speed_limits", f"{list(speed)} is not all > 0; valid: positive [rad/s]"
+        )
+    accel = None
+    if "accel_limits" in t:
+        accel = _numbers(source, "[arm] accel_limits", t["accel_limits"], what="[rad/s²]")
+        if len(accel) != len(speed) or any(v <= 0 for v in accel):
+            raise _fail(
+                source,
+                "[arm] accel_limits",
+                f"{list(accel)}; valid: {len(speed)} positive numbers [rad/s²], one per "
+                f"speed limit",
+            )
+    home = None
+    if "home" in t:
+        home = _numbers(source, "[arm] home", t["home"], what="[rad]")
+        if len(home) != len(speed):
+            raise _fail(
+                source,
+                "[arm] home",
+                f"has {len(home)} values; valid: {len(speed)} joint positions [rad], one per "
+                f"speed limit",
+            )
+    return ArmDescription(
+        mjcf=_mjcf_path(source, "[arm] mjcf", t["mjcf"]),
+        flange=flange,
+        speed_limits=speed,
+        accel_limits=accel,
+        home=home,
+        angle=_angle(source, "[arm] angle", t.get("angle")),
+    )
+
+
+def _unit_quat(source: Path, field_name: str, value: object) -> tuple[float, float, float, float]:
+    q = _numbers(source, field_name, value, 4, "(wxyz)")
+    norm = math.sqrt(sum(v * v for v in q))
+    if norm < 1e-9:
+        raise _fail(source, field_name, f"must be a non-zero quaternion (wxyz), got {value!r}")
+    w, x, y, z = (v / norm for v in q)
+    return (w, x, y, z)
+
+
+def _vec3(source: Path, field_name: str, value: object) -> tuple[float, float, float]:
+    x, y, z = _numbers(source, field_name, value, 3, "[m]")
+    return (x, y, z)
+
+
+def _parse_gripper(source: Path, t: Mapping[str, Any]) -> GripperDescription:
+    _check_keys(source, "gripper", t, _GRIPPER_KEYS)
+    if "mjcf" not in t:
+        raise _fail(source, "[gripper] mjcf", "missing (required)")
+    pads = None
+    if "pads" in t:
+        value = t["pads"]
+        valid = 'two lists of geom names, one per finger, e.g. [["left_pad"], ["right_pad"]]'
+        if (
+            not isinstance(value, list)
+            or len(value) != 2
+            or not all(isinstance(side, list) and side for side in value)
+            or not all(isinstance(n, str) and n for side in value for n in side)
+        ):
+            raise _fail(source, "[gripper] pads", f"got {value!r}; valid: {valid}")
+        pads = (tuple(value[0]), tuple(value[1]))
+    tcp = None
+    if "tcp" in t:
+        value = t["tcp"]
+        if isinstance(value, str) and value:
+            tcp = TcpOverride(site=value)
+        elif isinstance(value, dict):
+            _check_keys(source, "gripper.tcp", value, _TCP_KEYS)
+            tcp = TcpOverride(
+                pos=_vec3(source, "[gripper] tcp.pos", value.get("pos", [0.0, 0.0, 0.0])),
+                quat=_unit_quat(source, "[gripper] tcp.quat", value.get("quat", [1, 0, 0, 0])),
+            )
+        else:
+            raise _fail(
+                source,
+                "[gripper] tcp",
+                f"got {value!r}; valid: a site name or {{ pos = [x, y, z], quat = [w, x, y, z] }}",
+            )
+    commands: dict[str, tuple[float, ...] | None] = {}
+    for key in ("open_command", "closed_command"):
+        commands[key] = _numbers(source, f"[gripper] {key}", t[key]) if key in t else None
+    grip_force = None
+    if "grip_force" in t:
+        value = t["grip_force"]
+        if not _is_number(value) or not math.isfinite(value) or value <= 0:
+            raise _fail(
+                source, "[gripper] grip_force", f"must be a positive number [N], got {value!r}"
+            )
+        grip_force = float(value)
+    couple = t.get("couple_fingers", True)
+    if not isinstance(couple, bool):
+        raise _fail(source, "[gripper] couple_fingers", f"must be true or false, got {couple!r}")
+    return GripperDescription(
+        mjcf=_mjcf_path(source, "[gripper] mjcf", t["mjcf"]),
+        mount_pos=_vec3(source, "[gripper] mount_pos", t.get("mount_pos", [0.0, 0.0, 0.0])),
+        mount_quat=_unit_quat(source, "[gripper] mount_quat", t.get("mount_quat", [1, 0, 0, 0])),
+        angle=_angle(source, "[gripper] angle", t.get("angle")),
+        pads=pads,
+        tcp=tcp,
+        open_command=commands["open_command"],
+        closed_command=commands["closed_command"],
+        grip_force=grip_force,
+        couple_fingers=couple,
+    )

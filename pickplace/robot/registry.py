@@ -1,0 +1,78 @@
+"""Where robots come from: the bundled ones by name, a ``robot.toml`` path, or a description;
+and the digest of everything a robot is made of."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from pickplace.errors import RobotError
+from pickplace.robot.description import RobotDescription
+from pickplace.robot.mjcf import part_digest
+
+
+def _robots_dir() -> Path:
+    """``robots/`` of a source checkout, or the copy installed as ``pickplace/robots``."""
+    here = Path(__file__).resolve().parent.parent  # pickplace/
+    for candidate in (here.parent / "robots", here / "robots"):
+        if candidate.is_dir():
+            return candidate
+    return here.parent / "robots"
+
+
+def _world_path() -> Path:
+    here = Path(__file__).resolve().parent.parent  # pickplace/
+    for candidate in (here.parent / "scenes", here / "scenes"):
+        if (candidate / "world.xml").is_file():
+            return candidate / "world.xml"
+    return here.parent / "scenes" / "world.xml"
+
+
+ROBOTS_DIR = _robots_dir()
+
+
+DEFAULT_WORLD = _world_path()
+
+
+DEFAULT_ROBOT = "iiwa14-wsg50"
+
+
+def bundled_robots() -> list[str]:
+    """Names of the robots shipped in ``robots/`` (folders holding a ``robot.toml``)."""
+    return sorted(p.parent.name for p in ROBOTS_DIR.glob("*/robot.toml"))
+
+
+def resolve_description(robot: str | Path | RobotDescription) -> RobotDescription:
+    """A description from a bundled robot's name, a ``.toml`` path, or itself.
+
+    Raises:
+        RobotError: The name is not bundled and no such file exists (lists the bundled names).
+    """
+    if isinstance(robot, RobotDescription):
+        return robot
+    text = str(robot)
+    if text in bundled_robots():
+        return RobotDescription.from_toml(ROBOTS_DIR / text / "robot.toml")
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists():
+        return RobotDescription.from_toml(path)
+    raise RobotError(
+        f"unknown robot '{text}'; valid: {', '.join(bundled_robots())} or a robot.toml path"
+    )
+
+
+def description_digest(desc: RobotDescription) -> str:
+    """SHA-256 of what a robot is made of: its description and the arm and gripper files with
+    their includes and assets (read, not loaded into MuJoCo).
+
+    Raises:
+        RobotError: A file it names is missing.
+    """
+    # The parsed description (every field), and its path: messages name the file.
+    digest = hashlib.sha256(repr((desc.source, desc.name, desc.arm, desc.gripper)).encode())
+    for mjcf, field_name, angle in (
+        (desc.arm.mjcf, "[arm] mjcf", desc.arm.angle),
+        (desc.gripper.mjcf, "[gripper] mjcf", desc.gripper.angle),
+    ):
+        digest.update(part_digest(mjcf, field_name, angle, desc.source).encode())
+    return digest.hexdigest()

@@ -1,0 +1,1 @@
+"""One run request, validated once at the edge, planned, simulated and recorded."""

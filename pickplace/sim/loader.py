@@ -1,0 +1,116 @@
+"""Load a scene: a world file and a robot, composed, its home chosen, cached by file content.
+
+:func:`load_scene` is the one way to get a :class:`~pickplace.world.scene.Scene`:
+
+1. the world file (default ``scenes/world.xml``) is parsed, the robot (a bundled name, a
+   ``robot.toml`` path or a description) composed into it and calibrated
+   (:func:`pickplace.robot.compose.load_robot`), and the scene resolved
+   (:func:`pickplace.world.scene.build_scene`);
+2. a robot whose description gives no home has several IK home candidates; each is tried by
+   the planner on the nominal pick-and-place (brick at bin 1's centre to bin 2's centre) with
+   its kinematic pre-flight, and the home of the best plan is kept: feasible first, then the
+   earlier grasp candidate, then the larger joint margin (``../shared/notes/robot-models.md``:
+   margin to the limits alone picked homes that ran the last joint into its limit);
+3. the ``home`` keyframe holds that posture with the gripper open as plans open it
+   (:func:`pickplace.planning.plan.for_gripper`).
+
+The result is cached per process by the content of every file involved (the world file, the
+description, the arm and gripper files with their includes and assets) and the arguments;
+every call returns a scene with its own copy of the model, since faults change it (a mass, a
+gain), while the arm-only model of the IK is shared.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import hashlib
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from pickplace.errors import UnknownNameError
+from pickplace.planning.home import choose_home
+from pickplace.planning.plan import DEFAULT_PLAN_CONFIG, for_gripper
+from pickplace.robot.compose import PAD_SENSOR_SLOTS, load_robot
+from pickplace.robot.description import RobotDescription
+from pickplace.robot.registry import (
+    DEFAULT_ROBOT,
+    DEFAULT_WORLD,
+    description_digest,
+    resolve_description,
+)
+from pickplace.world.scene import Scene, WorldNames, build_scene, parse_scene
+
+_SCENES: dict[str, Scene] = {}
+
+
+def clear_scene_cache() -> None:
+    """Forget every cached scene (the next :func:`load_scene` composes again)."""
+    _SCENES.clear()
+
+
+def load_scene(
+    world: str | Path | None = None,
+    robot: str | Path | RobotDescription = DEFAULT_ROBOT,
+    *,
+    names: WorldNames | None = None,
+    pad_slots: int = PAD_SENSOR_SLOTS,
+) -> Scene:
+    """The world with the robot composed into it, its home chosen (see the module docstring).
+
+    Args:
+        world: World MJCF file; default ``scenes/world.xml``.
+        robot: A bundled robot's name (:func:`pickplace.robot.compose.bundled_robots`), a
+            ``robot.toml`` path, or a description.
+        names: World names to resolve; default :class:`~pickplace.world.scene.WorldNames`.
+        pad_slots: Contacts each pad–brick sensor reports.
+
+    Raises:
+        SceneError: The world file is missing, not valid MJCF or structurally wrong.
+        UnknownNameError: A world name is missing (the message lists those that exist).
+        RobotError: The robot description or a file it names is missing or unusable (one line
+            naming the file, the field and what would be valid).
+    """
+    path = (Path(world) if world is not None else DEFAULT_WORLD).resolve()
+    try:
+        content = path.read_bytes()
+    except OSError:
+        parse_scene(path)  # raises the SceneError that names what is wrong with the path
+        raise
+    desc = resolve_description(robot)
+    names = names or WorldNames()
+    key = hashlib.sha256(content)
+    for part in (str(path), description_digest(desc), repr(names), str(pad_slots)):
+        key.update(part.encode())
+    template = _SCENES.get(key.hexdigest())
+    if template is None:  # parsed only to compose: a cached scene's file parsed before
+        template = _compose(parse_scene(path), path, desc, names, pad_slots)
+        _SCENES[key.hexdigest()] = template
+    return dataclasses.replace(template, model=copy.deepcopy(template.model))
+
+
+def _compose(
+    spec: mujoco.MjSpec, path: Path, desc: RobotDescription, names: WorldNames, pad_slots: int
+) -> Scene:
+    if spec.geom(names.brick_geom) is None:  # the gripper is calibrated on the brick's size
+        raise UnknownNameError("geom", names.brick_geom, [g.name for g in spec.geoms if g.name])
+    composition = load_robot(desc, spec, brick_geom=names.brick_geom, pad_slots=pad_slots)
+    scene = build_scene(composition, path, names)
+    robot = scene.robot
+    q_home = robot.q_home
+    if len(robot.home_candidates) > 1:
+        q_home = choose_home(scene, robot.home_candidates)
+    width = for_gripper(DEFAULT_PLAN_CONFIG, robot.calibration).open_width
+    _set_home(scene, q_home, width)
+    return dataclasses.replace(scene, robot=dataclasses.replace(robot, q_home=q_home.copy()))
+
+
+def _set_home(scene: Scene, q_home: np.ndarray, width: float) -> None:
+    """Write the home posture and the gripper at ``width`` [m] into the ``home`` keyframe."""
+    m, r, key = scene.model, scene.robot, scene.home_key_id
+    m.key_qpos[key, r.arm_qpos_adr] = q_home
+    m.key_qpos[key, scene.gripper_qpos_adr] = r.qpos_for_width(width)
+    m.key_ctrl[key, r.arm_actuator_ids] = q_home
+    m.key_ctrl[key, r.gripper_actuator_ids] = r.ctrl_for_width(width)

@@ -1,0 +1,396 @@
+"""Named scenarios: each builds a :class:`~pickplace.sim.task.Task` from a scene and a seed.
+
+``pickplace scenarios`` lists them; ``pickplace run --scenario NAME`` runs one; the pytest suite
+runs every scenario and checks its documented outcome (:attr:`Scenario.expected`).
+
+To add a scenario: a builder function here and a :class:`Scenario` row in :data:`SCENARIOS`
+(with its expected outcome per controller), and the README's scenario table row; the
+parametrised test picks it up.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from mink.lie import SE3
+
+from pickplace.control.kinematics import ArmKinematics
+from pickplace.errors import PlanError, UnknownNameError
+from pickplace.planning.grasp import top_down_rotation, yaw_of
+from pickplace.planning.plan import Plan, PlanConfig, Waypoint, for_gripper, time_keyframes
+from pickplace.planning.planner import PickPlacePlanner
+from pickplace.planning.timing import TimingConfig
+from pickplace.planning.trajectory import PoseTrajectory
+from pickplace.sim import faults
+from pickplace.sim.goals import PlaceGoal, ReachGoal
+from pickplace.sim.task import Fault, Task
+from pickplace.world.placements import (
+    BrickPlacement,
+    brick_on_floor,
+    nominal_placement,
+    random_placement,
+    target_placement,
+)
+from pickplace.world.scene import Scene
+
+# Most brick poses pick-place-random draws before it gives up finding a feasible one.
+MAX_RANDOM_DRAWS = 100
+# Reach scenario: how far beyond the arm's reach the straight line's far end lies [m].
+REACH_OVERSHOOT = 0.03
+# Reach scenario: time spent pulling at the unreachable far end before coming back [s].
+REACH_HOLD = 1.0
+
+
+@dataclass(frozen=True)
+class BuildRequest:
+    """What a scenario's builder gets.
+
+    Attributes:
+        scene: The loaded scene.
+        scenario: Scenario name.
+        seed: Seed of randomised scenarios.
+        brick: Brick start pose override, or None.
+        controller: The run's controller (the planner's pre-flight runs it).
+        timing: How the planner times plans by the robot (``--speed`` is its ``speed``).
+    """
+
+    scene: Scene
+    scenario: str
+    seed: int
+    brick: BrickPlacement | None = None
+    controller: str = "qp"
+    timing: TimingConfig = field(default_factory=TimingConfig)
+
+    def planner(self) -> PickPlacePlanner:
+        """A planner for this request's scene, controller and timing."""
+        return PickPlacePlanner(self.scene, self.controller, timing=self.timing)
+
+
+def pick_place_task(
+    req: BuildRequest,
+    placement: BrickPlacement,
+    goal: BrickPlacement | None = None,
+    fault_list: Sequence[Fault] = (),
+    preflight: bool = True,
+    planner: PickPlacePlanner | None = None,
+) -> Task:
+    """Plan a pick from ``placement`` in bin 1 and a place at ``goal`` (default: bin 2 centre).
+
+    With ``preflight`` the planner's candidates are pre-flighted and the first feasible one is
+    the task's plan (the task records them all; none feasible: the run ends before any
+    physics). Without it, the first candidate is executed unchecked.
+    """
+    scene = req.scene
+    X_WO_pick = brick_on_floor(scene, placement, scene.source_bin.floor_top_z)
+    X_WO_place = brick_on_floor(
+        scene, goal or target_placement(scene), scene.target_bin.floor_top_z
+    )
+    planner = planner or req.planner()
+    report = planner.plan(X_WO_pick, X_WO_place) if preflight else None
+    return Task(
+        scenario=req.scenario,
+        seed=req.seed,
+        goal=PlaceGoal(X_WO_place, scene.target_bin),
+        plan=report.plan if report else planner.make_plan(X_WO_pick, X_WO_place),
+        X_WO_start=X_WO_pick,
+        faults=tuple(fault_list),
+        planning=report,
+    )
+
+
+@dataclass(frozen=True)
+class ArmReach:
+    """Where the arm is fully stretched with the tool pointing down, from its kinematic chain.
+
+    Attributes:
+        shoulder: Index of the shoulder joint: the first arm joint whose axis, with every joint
+            at 0, is perpendicular to the base joint's axis.
+        elbow: The next joint whose axis is parallel to the shoulder's (then).
+        wrist: The next one after the elbow.
+        stretch: Longest distance between the shoulder's and the wrist's axes, across them:
+            the elbow straight (upper arm plus forearm, measured at q = 0 between the joint
+            anchors, without their components along the axes) [m].
+    """
+
+    shoulder: int
+    elbow: int
+    wrist: int
+    stretch: float
+
+
+_AXIS_TOLERANCE = 1e-6  # |cos| of axes counted perpendicular (below) or parallel (above 1 - it)
+
+
+def arm_reach(scene: Scene) -> ArmReach:
+    """The arm's shoulder, elbow and wrist joints and its stretch (see :class:`ArmReach`).
+
+    Raises:
+        PlanError: The arm has no three such joints (it cannot be stretched by a pitch chain).
+    """
+    kin = ArmKinematics(scene)
+    kin.update(np.zeros(scene.n_joints))
+    axes, anchors = kin.data.xaxis, kin.data.xanchor  # the arm model's joints are the arm's
+    base = axes[0]
+    pitch = [j for j in range(1, scene.n_joints) if abs(axes[j] @ base) < _AXIS_TOLERANCE]
+    chain = [j for j in pitch if abs(axes[j] @ axes[pitch[0]]) > 1.0 - _AXIS_TOLERANCE]
+    if len(chain) < 3:
+        raise PlanError(
+            f"the arm has {len(chain)} parallel joints across its base axis ("
+            f"{', '.join(scene.arm_joint_names[j] for j in chain) or 'none'}); valid for "
+            f"singular-reach: an arm with shoulder, elbow and wrist joints"
+        )
+    s, e, w = chain[:3]
+    a = axes[s]
+
+    def across(v: np.ndarray) -> float:
+        return float(np.linalg.norm(v - (v @ a) * a))
+
+    return ArmReach(s, e, w, across(anchors[e] - anchors[s]) + across(anchors[w] - anchors[e]))
+
+
+def full_stretch_distance(scene: Scene, z_tool: float) -> float:
+    """Horizontal distance from the base axis of the tool, pointing down at height ``z_tool``
+    [m], with the arm fully stretched in the vertical plane of its pitch joints [m].
+
+    The arm's plane and the tool's offsets from the wrist are taken at the home posture (the
+    tool pointing down): the wrist sits at the tool's height plus its offset above it, at the
+    stretch from the shoulder; the tool's offset along the pitch axes (e.g. a UR's wrist) moves
+    it sideways out of the plane.
+    """
+    reach = arm_reach(scene)
+    kin = ArmKinematics(scene)
+    kin.update(scene.q_home)
+    d = kin.data
+    a = d.xaxis[reach.shoulder].copy()  # the pitch axis at home (horizontal)
+    p_base, p_shoulder = scene.p_W_base, d.xanchor[reach.shoulder]
+    p_wrist, p_tool = d.xanchor[reach.wrist], kin.p_WG()
+    u = np.cross(a, [0.0, 0.0, 1.0])  # horizontal, across the pitch axis: the arm's radial axis
+    u /= np.linalg.norm(u)
+    if (p_tool - p_base) @ u < 0.0:
+        u = -u
+    wrist_to_tool = p_tool - p_wrist
+    z_wrist = z_tool - wrist_to_tool[2]
+    rise = z_wrist - p_shoulder[2]
+    if abs(rise) >= reach.stretch:
+        raise PlanError(
+            f"the wrist cannot reach height {z_wrist:.3f} m from the shoulder at "
+            f"{p_shoulder[2]:.3f} m (stretch {reach.stretch:.3f} m); valid: a lower tool height"
+        )
+    r_wrist = (p_shoulder - p_base) @ u + math.sqrt(reach.stretch**2 - rise**2)
+    r_tool = r_wrist + wrist_to_tool @ u
+    sideways = (p_tool - p_base) @ a
+    return math.hypot(r_tool, sideways)
+
+
+def singular_reach_task(req: BuildRequest, plan: PlanConfig | None = None) -> Task:
+    """A straight radial line that pulls the tool past full stretch and back (seed 000).
+
+    The line runs along +y from the base axis (away from both bins) at a height of 0.30 m with
+    the tool pointing down. Its far end lies ``REACH_OVERSHOOT`` beyond the arm's reach there,
+    computed from the kinematic chain (:func:`full_stretch_distance`: the wrist can be at
+    most upper arm plus forearm from the shoulder, and the tool hangs below it as at home).
+    """
+    scene = req.scene
+    plan = for_gripper(plan or PlanConfig(), scene.robot.calibration)
+    kin = ArmKinematics(scene)
+    kin.update(scene.q_home)
+    X_home = kin.X_WG()
+    z_tool = 0.30
+    r_far = full_stretch_distance(scene, z_tool) + REACH_OVERSHOOT
+    # Keep the tool's yaw relative to the base as at home, so the last joint does not wind up
+    # while the base swings from the home direction to the line's direction (+y).
+    base = scene.p_W_base
+    p_home = X_home.translation() - base
+    swing = math.pi / 2 - math.atan2(p_home[1], p_home[0])
+    R = top_down_rotation(yaw_of(X_home.rotation()) + swing)
+
+    def at(x: float, y: float) -> SE3:
+        return SE3.from_rotation_and_translation(R, np.array([base[0] + x, base[1] + y, z_tool]))
+
+    via, near, far = at(0.35, 0.35), at(0.0, 0.45), at(0.0, r_far)
+    w = plan.open_width
+    waypoints = [
+        Waypoint("initial", X_home, w),
+        Waypoint("via", via, w),
+        Waypoint("line-start", near, w),
+        Waypoint("stretched", far, w),
+        Waypoint("hold", far, w, min_duration=REACH_HOLD),
+        Waypoint("line-end", near, w),
+    ]
+    keyframes = time_keyframes(waypoints, plan)
+    X_WO = brick_on_floor(scene, nominal_placement(scene), scene.source_bin.floor_top_z)
+    return Task(
+        scenario=req.scenario,
+        seed=req.seed,
+        goal=ReachGoal(),
+        plan=Plan(PoseTrajectory(keyframes, plan.profile)),
+        X_WO_start=X_WO,
+    )
+
+
+Builder = Callable[[BuildRequest], Task]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named scenario.
+
+    Attributes:
+        name: Registry key.
+        summary: One line shown by ``pickplace scenarios``.
+        build: Builds the task (see :class:`BuildRequest`).
+        expected: ``"success"`` or the failure reason the scenario is designed to produce
+            with the default controller (``qp``).
+        expected_with: Documented outcomes with other controllers, where they differ or are
+            the point of the scenario (e.g. ``{"pinv": "limit-violated"}``).
+        uses_brick: Whether ``--brick`` applies.
+        random: Whether the seed changes the task.
+    """
+
+    name: str
+    summary: str
+    build: Builder
+    expected: str = "success"
+    expected_with: Mapping[str, str] = field(default_factory=dict)
+    uses_brick: bool = True
+    random: bool = False
+
+    def outcomes(self) -> dict[str, str]:
+        """Documented outcome per controller: ``qp`` and every one in ``expected_with``."""
+        return {"qp": self.expected, **self.expected_with}
+
+
+def _nominal(req: BuildRequest) -> Task:
+    return pick_place_task(req, req.brick or nominal_placement(req.scene))
+
+
+def _random(req: BuildRequest) -> Task:
+    """A brick pose drawn from the seed, drawn again (same generator) until the planner finds
+    a feasible plan, so the scenario always has one; a given ``--brick`` is planned as is.
+
+    A brick too heavy for the grip is planned all the same (with the timing's warning, see
+    :mod:`pickplace.planning.planner`): whether it is held is the physics' to show.
+    """
+    if req.brick is not None:
+        return pick_place_task(req, req.brick)
+    rng = np.random.default_rng(req.seed)
+    planner = req.planner()
+    for _ in range(MAX_RANDOM_DRAWS):
+        task = pick_place_task(req, random_placement(req.scene, rng), planner=planner)
+        if task.planning is not None and task.planning.feasible:
+            return task
+    raise PlanError(
+        f"no feasible brick pose in bin 1 after {MAX_RANDOM_DRAWS} draws from seed {req.seed}"
+    )
+
+
+def _reach(req: BuildRequest) -> Task:
+    return singular_reach_task(req)
+
+
+def _with_fault(fault: Callable[[Scene], Fault]) -> Builder:
+    def build(req: BuildRequest) -> Task:
+        placement = req.brick or nominal_placement(req.scene)
+        return pick_place_task(req, placement, fault_list=[fault(req.scene)])
+
+    return build
+
+
+def _unreachable(req: BuildRequest) -> Task:
+    # A place target 1.6 m out along +x: beyond the reach of every bundled arm (the iiwa's is
+    # 1.3 m); executed without the pre-flight, which would refuse it (``pickplace plan
+    # --scenario fault-unreachable``).
+    goal = BrickPlacement(1.6, 0.0, 0.0)
+    placement = req.brick or nominal_placement(req.scene)
+    return pick_place_task(req, placement, goal=goal, preflight=False)
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        Scenario(
+            "pick-place", "nominal pick from bin 1's centre, place at bin 2's centre", _nominal
+        ),
+        Scenario(
+            "pick-place-random",
+            "brick x, y, yaw drawn from the seed over bin 1's floor (drawn again until the "
+            "planner finds a feasible plan)",
+            _random,
+            random=True,
+        ),
+        Scenario(
+            "singular-reach",
+            "tool pulled along a straight line past full arm stretch "
+            "and back (qp stays within limits, pinv does not)",
+            _reach,
+            expected_with={"pinv": "limit-violated", "dls": "limit-violated"},
+            uses_brick=False,
+        ),
+        Scenario(
+            "fault-gripper-disabled",
+            "the gripper's actuators have no force -> missed-grasp",
+            _with_fault(faults.GripperDisabled),
+            expected="missed-grasp",
+        ),
+        Scenario(
+            "fault-brick-moved",
+            "the brick is moved 8 cm after planning -> missed-grasp",
+            _with_fault(faults.BrickMoved),
+            expected="missed-grasp",
+        ),
+        Scenario(
+            "fault-heavy-brick",
+            "the brick weighs 30 kg, more than friction at the pads holds -> dropped",
+            _with_fault(faults.HeavyBrick),
+            expected="dropped",
+        ),
+        Scenario(
+            "fault-knock",
+            "an impulse knocks the brick out of the gripper mid-transport -> dropped",
+            _with_fault(faults.Knock),
+            expected="dropped",
+        ),
+        Scenario(
+            "fault-unreachable",
+            "place target 1.6 m away, outside the arm's reach, executed without the "
+            "pre-flight -> ik-failed",
+            _unreachable,
+            expected="ik-failed",
+        ),
+        Scenario(
+            "fault-nan",
+            "a NaN is injected into the brick's velocity mid-run -> nan",
+            _with_fault(faults.InjectNaN),
+            expected="nan",
+        ),
+        Scenario(
+            "fault-obstacle",
+            "after planning, a box appears in the transfer path -> collision",
+            _with_fault(faults.Obstacle),
+            expected="collision",
+        ),
+    )
+}
+
+
+def get_scenario(name: str) -> Scenario:
+    """Return the scenario called ``name``.
+
+    Raises:
+        UnknownNameError: No such scenario; the message lists the valid ones.
+    """
+    try:
+        return SCENARIOS[name]
+    except KeyError:
+        raise UnknownNameError("scenario", name, SCENARIOS) from None
+
+
+__all__ = [
+    "SCENARIOS",
+    "BuildRequest",
+    "Scenario",
+    "get_scenario",
+]

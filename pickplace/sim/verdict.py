@@ -1,0 +1,199 @@
+"""The verdict of a run: failure reasons, the geometry that decides them, metrics, the summary.
+
+Everything here is judged from stated geometry (:class:`~pickplace.sim.checks.SuccessCriteria`, the
+scene's bins and brick) and from the tick log, never assumed. The checks that run during a run,
+and the failure reasons, are in :mod:`pickplace.sim.checks`; the goals in
+:mod:`pickplace.sim.goals`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import mujoco
+import numpy as np
+from mink.lie import SE3, SO3
+
+from pickplace.control.controllers import IK_STATUSES
+from pickplace.geometry import box_corners, transform_points
+from pickplace.sim.checks import FailureReason, SuccessCriteria
+from pickplace.sim.events import Event
+from pickplace.sim.ticklog import TickLog
+from pickplace.world.scene import BinGeometry, Scene
+
+# ------------------------------------------------------------------------ the brick
+
+
+def brick_pose(scene: Scene, data: mujoco.MjData) -> SE3:
+    """Current pose X_WO of the brick."""
+    b = scene.brick_body_id
+    return SE3.from_rotation_and_translation(SO3(np.array(data.xquat[b])), np.array(data.xpos[b]))
+
+
+def brick_at_rest(scene: Scene, data: mujoco.MjData, criteria: SuccessCriteria) -> bool:
+    """True if the brick's linear and angular speeds are below the rest thresholds."""
+    a = scene.brick_dof_adr
+    v = data.qvel[a : a + 6]
+    return bool(
+        float(v[:3] @ v[:3]) < criteria.rest_speed**2
+        and float(v[3:] @ v[3:]) < criteria.rest_angular_speed**2
+    )
+
+
+def brick_touches_robot(scene: Scene, data: mujoco.MjData) -> bool:
+    """True if any geom of the robot (arm or gripper) touches the brick."""
+    brick = scene.brick_geom_id
+    for i in range(data.ncon):
+        c = data.contact[i]
+        g1, g2 = int(c.geom1), int(c.geom2)
+        if brick in (g1, g2):
+            other = g2 if g1 == brick else g1
+            if scene.is_robot_geom(other):
+                return True
+    return False
+
+
+def placement_problems(
+    scene: Scene,
+    data: mujoco.MjData,
+    bin_: BinGeometry,
+    criteria: SuccessCriteria,
+    grasp_width: float,
+) -> list[str]:
+    """Reasons the brick is not verifiably resting in ``bin_`` (empty if it is).
+
+    The brick's box corners must lie over the bin's floor inside its inner walls, its lowest
+    corner on the floor's top face within ``floor_tolerance``, its z axis within ``max_tilt``
+    of vertical; it must be at rest, free of the gripper, and the gripper open wider than the
+    brick was between its fingers (``grasp_width`` [m]).
+    """
+    X_WO = brick_pose(scene, data)
+    corners_W = transform_points(X_WO, box_corners(scene.brick_half_extents))
+    problems: list[str] = []
+    if not bin_.contains_xy(corners_W):
+        problems.append(f"footprint not inside {bin_.name}'s inner walls")
+    lowest = float(corners_W[:, 2].min())
+    if abs(lowest - bin_.floor_top_z) > criteria.floor_tolerance:
+        problems.append(
+            f"lowest corner at z={lowest:.3f} m, {bin_.name} floor at z={bin_.floor_top_z:.3f} m"
+        )
+    z_O = X_WO.rotation().as_matrix()[:, 2]
+    tilt = float(np.arccos(np.clip(z_O[2], -1.0, 1.0)))
+    if tilt > criteria.max_tilt:
+        problems.append(f"tilted {np.rad2deg(tilt):.0f} deg")
+    if not brick_at_rest(scene, data, criteria):
+        problems.append("still moving")
+    if brick_touches_robot(scene, data):
+        problems.append("still touching the gripper")
+    gap = scene.gripper_gap(data)
+    if gap < grasp_width:
+        problems.append(f"gripper not open (gap {gap * 1000:.0f} mm)")
+    return problems
+
+
+# -------------------------------------------------------------------------- metrics
+
+
+def run_metrics(log: TickLog, ticks: int, X_WO_final: SE3, X_WO_goal: SE3 | None) -> dict[str, Any]:
+    """The summary's metrics over the first ``ticks`` rows of the log (see the README)."""
+    sl = slice(0, ticks)
+    counts = {s: 0 for s in IK_STATUSES}
+    for code, c in zip(*np.unique(log.ik_status[sl], return_counts=True), strict=True):
+        counts[IK_STATUSES[int(code)]] = int(c)
+    slip = log.slip[sl]
+    slip = slip[np.isfinite(slip)]
+
+    def finite(x: float) -> float | None:
+        return float(x) if np.isfinite(x) else None
+
+    return {
+        "place_error_m": (
+            float(np.linalg.norm(X_WO_final.translation() - X_WO_goal.translation()))
+            if X_WO_goal
+            else None
+        ),
+        "min_singular_value": float(log.sigma[sl, -1].min()) if ticks else float("nan"),
+        "max_condition_number": finite(log.condition[sl].max()) if ticks else None,
+        "min_manipulability_w1": float(log.manipulability[sl, 0].min()) if ticks else None,
+        "max_joint_speed_ratio": float(log.speed_ratio[sl].max()) if ticks else 0.0,
+        "max_joint_limit_violation_rad": float(log.limit_violation[sl].max()) if ticks else 0.0,
+        "max_position_error_m": float(log.position_error[sl].max()) if ticks else 0.0,
+        "max_orientation_error_rad": float(log.orientation_error[sl].max()) if ticks else 0.0,
+        "max_slip_m": float(slip.max()) if slip.size else None,
+        "max_robot_world_contact_force_n": float(log.robot_world_force[sl].max()) if ticks else 0.0,
+        "ik_status_counts": counts,
+        "ik_tick_us_median": float(np.median(log.ik_us[sl])) if ticks else None,
+    }
+
+
+# -------------------------------------------------------------------------- summary
+
+
+@dataclass
+class RunResult:
+    """Outcome of one run; :meth:`summary` is the JSON the CLI prints."""
+
+    scenario: str
+    controller: str
+    seed: int
+    goal: str
+    success: bool
+    failure: FailureReason | None
+    failure_tick: int | None
+    failure_time_s: float | None
+    ticks: int
+    sim_time_s: float
+    wall_time_s: float
+    brick_start_xyz: list[float]
+    brick_final_xyz: list[float]
+    target_xyz: list[float]
+    events: list[Event]
+    metrics: dict[str, Any]
+    plan: dict[str, Any] | None = None
+    planning_time_s: float | None = None
+    recording: str | None = None
+    robot: str | None = None
+    parameters: dict[str, Any] | None = None
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-serialisable summary (the keys are an interface: see the README)."""
+        rtf = self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else float("inf")
+        out: dict[str, Any] = {
+            "scenario": self.scenario,
+            "robot": self.robot,
+            "controller": self.controller,
+            "seed": self.seed,
+            "goal": self.goal,
+            "success": self.success,
+            "failure": None if self.failure is None else self.failure.value,
+            "failure_tick": self.failure_tick,
+            "failure_time_s": self.failure_time_s,
+            "brick_start_xyz": self.brick_start_xyz,
+            "brick_final_xyz": self.brick_final_xyz,
+            "target_xyz": self.target_xyz,
+            "sim_time_s": self.sim_time_s,
+            "wall_time_s": self.wall_time_s,
+            "realtime_factor": rtf,
+            "ticks": self.ticks,
+        }
+        out.update(self.metrics)
+        out["planning_time_s"] = self.planning_time_s
+        out["plan"] = self.plan
+        out["events"] = [
+            {"tick": e.tick, "t": e.t, "level": e.level, "kind": e.kind, "text": e.text}
+            for e in self.events
+        ]
+        out["recording"] = self.recording
+        if self.parameters is not None:  # only when something was varied
+            out["parameters"] = self.parameters
+        return out
+
+
+# Fields that differ between two runs of the same inputs (wall-clock measurements).
+WALL_TIME_FIELDS: tuple[str, ...] = (
+    "wall_time_s",
+    "realtime_factor",
+    "ik_tick_us_median",
+    "planning_time_s",
+)

@@ -1,0 +1,876 @@
+"""A sweep as one Rerun recording that opens ready to review.
+
+Input: the per-trial summaries (the JSON keys of ``pickplace run --json``; at least ``seed``,
+``success``, ``failure`` and ``brick_start_xyz``), the varied parameters and each trial's draw
+(:mod:`pickplace.sim.vary`), and the sweep's report dict. Everything is static (no timeline): a
+sweep has no time axis of its own. Lengths in m.
+
+=========================================  ====================================================
+Entity path                                Contents
+=========================================  ====================================================
+``world``                                  ``ViewCoordinates`` right-hand, z up
+``world/source_bin/floor``                 the source bin's free floor (between the inner
+                                           walls), from :class:`~pickplace.world.scene.BinGeometry`
+``world/source_bin/walls``                 outline of the inner walls, floor to rim
+``world/source_bin/arm_side``              label on the wall that faces the arm's base
+``world/trials/<outcome>``                 one point per trial at its ``brick_start_xyz``,
+                                           coloured by outcome (``success`` or the failure
+                                           reason), labelled ``reason · seed N`` (labels shown
+                                           up to ``MAX_SHOWN_LABELS`` failures, else on hover)
+``world/trials/pose_offsets``              when ``pose_noise`` is varied: an arrow per trial
+                                           from the planned brick position to where it was
+                                           moved after planning (the offset the run applied,
+                                           kept inside the bin), coloured by outcome
+``world/legend``                           one labelled point per outcome, "dropped (25)",
+                                           beside the bin
+``plots/success_by/<parameter>/...``       a bar chart per varied parameter (a 2D view, so
+                                           that it can carry whiskers): ``bars`` (``Boxes2D``,
+                                           success rate per bin, hover text with counts and
+                                           interval), ``intervals`` (95 % Wilson whiskers),
+                                           ``counts`` ("3/10" above each bar), ``axes``,
+                                           ``grid``, ``x_ticks`` (bin edges, or grid values),
+                                           ``y_ticks`` (0–100 %), ``x_title`` (name [unit]).
+                                           Chart units: x in [0, ``CHART_WIDTH``] across the
+                                           bins, y = −rate[%] · ``CHART_HEIGHT`` / 100
+``report``                                 the report (``TextDocument``, markdown): rate with
+                                           its Wilson interval, failures by reason with seeds
+                                           and the command that re-runs one, p50/p95/worst of
+                                           the metrics, per-bin tables, then the report dict
+=========================================  ====================================================
+
+In a comparison (``--compare``: trials carry an ``arm``, e.g. ``controller=qp``) each arm's
+points are under ``world/trials/<arm>/<outcome>`` and its charts under
+``plots/<arm>/success_by/<parameter>`` (``=`` written ``-``: ``controller-qp``); the legend
+names the arm; the report adds the paired comparison.
+
+The embedded blueprint shows the bin from above (camera placed from the bin's geometry) over
+the charts on the left, the report on the right. The file is encoded in memory, written beside
+its path and renamed onto it once it reads back complete (:class:`~pickplace.outfile.OutputFile`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from pickplace.errors import InvalidInputError, OutputError, RecordingError
+from pickplace.outfile import OutputFile
+from pickplace.sim.loader import load_scene
+from pickplace.sim.vary import ParameterDraw, VaryPlan, VarySpec
+from pickplace.sweep.bins import BinStat, success_by_parameter
+from pickplace.sweep.report import METRICS, Metric, metric_summary, outcome_of, sweep_title
+from pickplace.sweep.stats import RateInterval, success_rate
+from pickplace.world.scene import BinGeometry, Scene
+
+if TYPE_CHECKING:
+    from pickplace.sweep.sweep import SweepRequest
+
+APPLICATION_ID = "pickplace"
+POINT_RADIUS = 0.005  # trial markers [m]
+SUCCESS_COLOR = (0.17, 0.63, 0.17)
+FAILURE_COLORS = {
+    "missed-grasp": (1.00, 0.50, 0.05),
+    "dropped": (0.84, 0.15, 0.16),
+    "ik-failed": (0.58, 0.40, 0.74),
+    "limit-violated": (0.55, 0.34, 0.29),
+    "not-in-target-bin": (0.12, 0.47, 0.71),
+    "nan": (0.50, 0.50, 0.50),
+    "interrupted": (0.10, 0.10, 0.10),
+    "no-feasible-plan": (0.62, 0.62, 0.85),
+    "collision": (0.95, 0.85, 0.10),
+    "worker-died": (0.30, 0.30, 0.30),
+    "worker-error": (0.40, 0.20, 0.40),
+}
+# Further reasons take these in order of first appearance.
+EXTRA_COLORS = [(0.89, 0.47, 0.76), (0.74, 0.74, 0.13), (0.09, 0.75, 0.81)]
+BIN_FLOOR_COLOR = (0.55, 0.42, 0.30, 0.35)
+BIN_WALL_COLOR = (0.35, 0.27, 0.20)
+RATE_COLOR = (0.17, 0.63, 0.17)
+ENCODE_TIMEOUT_S = 30.0  # bound on encoding what was logged (normally milliseconds) [s]
+# Trial labels are shown when at most this many failed trials are drawn (else on hover only).
+MAX_SHOWN_LABELS = 15
+
+
+def outcome_colors(outcomes: Sequence[str]) -> dict[str, tuple[float, float, float]]:
+    """Colour of each outcome: green for success, a fixed colour per known failure reason."""
+    colors: dict[str, tuple[float, float, float]] = {}
+    extra = iter(EXTRA_COLORS * (1 + len(outcomes) // len(EXTRA_COLORS)))
+    for o in outcomes:
+        if o in colors:
+            continue
+        if o == "success":
+            colors[o] = SUCCESS_COLOR
+        else:
+            colors[o] = FAILURE_COLORS.get(o) or next(extra)
+    return colors
+
+
+def bin_outline_W(bin_: BinGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (4, 3) of a bin's free floor at floor height and at rim height, in world [m]."""
+    hx, hy = bin_.inner_half_extents
+    corners_B = np.array([[-hx, -hy, 0.0], [hx, -hy, 0.0], [hx, hy, 0.0], [-hx, hy, 0.0]])
+    R_WB = bin_.X_WB.rotation().as_matrix()
+    corners_W = corners_B @ R_WB.T + bin_.X_WB.translation()
+    floor = corners_W.copy()
+    floor[:, 2] = bin_.floor_top_z
+    rim = corners_W.copy()
+    rim[:, 2] = bin_.wall_top_z
+    return floor, rim
+
+
+def _log_bin(rec: rr.RecordingStream, bin_: BinGeometry, p_W_base: np.ndarray) -> None:
+    """The bin's floor, wall outline and a label on the wall that faces the arm's base."""
+    floor, rim = bin_outline_W(bin_)
+    mids = 0.5 * (rim + np.roll(rim, -1, axis=0))
+    near = int(np.argmin(np.linalg.norm(mids[:, :2] - np.asarray(p_W_base)[:2], axis=1)))
+    rec.log(
+        "world/source_bin/arm_side",
+        rr.Points3D(
+            mids[near : near + 1],
+            radii=[0.001],
+            colors=[BIN_WALL_COLOR],
+            labels=[f"{bin_.name}: this wall faces the arm"],
+            show_labels=True,
+        ),
+        static=True,
+    )
+    rec.log(
+        "world/source_bin/floor",
+        rr.Mesh3D(
+            vertex_positions=floor,
+            triangle_indices=[[0, 1, 2], [0, 2, 3]],
+            vertex_normals=[[0.0, 0.0, 1.0]] * 4,
+            albedo_factor=BIN_FLOOR_COLOR,
+        ),
+        static=True,
+    )
+    loops = [np.vstack([floor, floor[:1]]), np.vstack([rim, rim[:1]])]
+    posts = [np.vstack([floor[i], rim[i]]) for i in range(4)]
+    rec.log(
+        "world/source_bin/walls",
+        rr.LineStrips3D([*loops, *posts], colors=[BIN_WALL_COLOR], radii=[0.0015]),
+        static=True,
+    )
+
+
+def _log_trials(
+    rec: rr.RecordingStream,
+    trials: Sequence[Mapping[str, Any]],
+    draws: Mapping[int, ParameterDraw],
+    colors: Mapping[str, tuple[float, float, float]],
+    base: str = "world/trials",
+) -> None:
+    by_outcome: dict[str, list[Mapping[str, Any]]] = {}
+    for t in trials:
+        if t.get("brick_start_xyz") is not None:
+            by_outcome.setdefault(outcome_of(t), []).append(t)
+    failed = sum(len(g) for o, g in by_outcome.items() if o != "success")
+    for outcome, group in by_outcome.items():
+        labels = [
+            f"seed {t['seed']}" if outcome == "success" else f"{outcome} · seed {t['seed']}"
+            for t in group
+        ]
+        rec.log(
+            f"{base}/{rr.escape_entity_path_part(outcome)}",
+            rr.Points3D(
+                np.array([t["brick_start_xyz"] for t in group], dtype=np.float64),
+                radii=[POINT_RADIUS],
+                colors=[colors[outcome]],
+                labels=labels,
+                show_labels=outcome != "success" and failed <= MAX_SHOWN_LABELS,
+            ),
+            static=True,
+        )
+    origins, vectors, arrow_colors = [], [], []
+    for t in trials:
+        offset = _pose_offset(t, draws.get(int(t["seed"])))
+        if offset is not None and t.get("brick_start_xyz") is not None:
+            origins.append(t["brick_start_xyz"])
+            vectors.append(offset)
+            arrow_colors.append(colors[outcome_of(t)])
+    if origins:
+        rec.log(
+            f"{base}/pose_offsets",
+            rr.Arrows3D(origins=origins, vectors=vectors, colors=arrow_colors, radii=[0.001]),
+            static=True,
+        )
+
+
+def _pose_offset(trial: Mapping[str, Any], draw: ParameterDraw | None) -> np.ndarray | None:
+    """Where the brick was moved after planning: the offset the run applied (kept inside the
+    bin) when the trial records it, else the drawn one; None without pose noise."""
+    applied = (trial.get("parameters") or {}).get("pose_offset_applied_xy_m")
+    if applied is not None:
+        return np.array([applied[0], applied[1], 0.0])
+    return draw.pose_offset_W if draw is not None else None
+
+
+def _log_legend(
+    rec: rr.RecordingStream,
+    bin_: BinGeometry,
+    entries: Sequence[tuple[str, tuple[float, float, float]]],
+) -> None:
+    """One labelled point per (label, colour) in a column beside the bin (outside its +x
+    wall)."""
+    hx, hy = bin_.inner_half_extents
+    n = len(entries)
+    step = 2.0 * hy / max(n, 1)
+    p_B = np.array([[hx + 0.05, hy - (k + 0.5) * step, 0.0] for k in range(n)])
+    R_WB = bin_.X_WB.rotation().as_matrix()
+    p_W = p_B @ R_WB.T + bin_.X_WB.translation()
+    p_W[:, 2] = bin_.floor_top_z
+    rec.log(
+        "world/legend",
+        rr.Points3D(
+            p_W,
+            radii=[1.5 * POINT_RADIUS],
+            colors=[c for _, c in entries],
+            labels=[label for label, _ in entries],
+            show_labels=True,
+        ),
+        static=True,
+    )
+
+
+# Chart coordinates (2D view, y down): bins span x in [0, CHART_WIDTH], 100 % is at
+# y = -CHART_HEIGHT.
+CHART_WIDTH = 100.0
+CHART_HEIGHT = 60.0
+CHART_BOUNDS = ((-13.0, 104.0), (-CHART_HEIGHT - 10.0, 15.0))
+AXIS_COLOR = (0.75, 0.75, 0.75)
+GRID_COLOR = (0.25, 0.25, 0.25)
+WHISKER_COLOR = (0.95, 0.95, 0.95)
+EMPTY_COLOR = (0.5, 0.5, 0.5)
+
+
+def _chart_slots(stats: Sequence[BinStat]) -> list[tuple[float, float]]:
+    """(left, width) of each bin on the chart's x axis: proportional to the parameter's value
+    for equal-width bins, equal slots for grid values (categories)."""
+    if all(s.low == s.high for s in stats):
+        w = CHART_WIDTH / len(stats)
+        return [(k * w, w) for k in range(len(stats))]
+    lo, hi = stats[0].low, stats[-1].high
+    scale = CHART_WIDTH / (hi - lo)
+    return [((s.low - lo) * scale, (s.high - s.low) * scale) for s in stats]
+
+
+def _filled_boxes(
+    left: Sequence[float], width: Sequence[float], height: Sequence[float]
+) -> tuple[list[list[float]], list[list[float]], list[float]]:
+    """Boxes2D mins, sizes and radii that draw filled bars from y = 0 up to -height.
+
+    Boxes2D draws outlines only: an outline whose stroke half-width is a quarter of the bar's
+    smaller side, on a box shrunk by that much, covers the whole bar.
+    """
+    mins, sizes, radii = [], [], []
+    for x, w, h in zip(left, width, height, strict=True):
+        t = 0.25 * min(w, h)
+        mins.append([x + t, -h + t])
+        sizes.append([w - 2.0 * t, h - 2.0 * t])
+        radii.append(t)
+    return mins, sizes, radii
+
+
+def _log_bins(rec: rr.RecordingStream, spec: VarySpec, stats: Sequence[BinStat], base: str) -> None:
+    """A bar chart of the success rate per bin with 95 % Wilson whiskers and n per bar, at
+    entity path ``base``."""
+    unit = spec.parameter.unit
+    slots = _chart_slots(stats)
+    y = CHART_HEIGHT / 100.0  # chart units per percent
+    rec.log(
+        f"{base}/axes",
+        rr.LineStrips2D(
+            [[[0.0, 0.0], [CHART_WIDTH, 0.0]], [[0.0, 0.0], [0.0, -CHART_HEIGHT]]],
+            radii=[0.25],
+            colors=[AXIS_COLOR],
+            draw_order=3.0,
+        ),
+        static=True,
+    )
+    levels = [25.0, 50.0, 75.0, 100.0]
+    rec.log(
+        f"{base}/grid",
+        rr.LineStrips2D(
+            [[[0.0, -v * y], [CHART_WIDTH, -v * y]] for v in levels],
+            radii=[0.12],
+            colors=[GRID_COLOR],
+            draw_order=0.0,
+        ),
+        static=True,
+    )
+    rec.log(
+        f"{base}/y_ticks",
+        rr.Points2D(
+            [[-8.0, -v * y - 1.0] for v in [0.0, *levels]],
+            radii=[0.01],
+            colors=[AXIS_COLOR],
+            labels=[f"{v:.0f} %" for v in [0.0, *levels]],
+            show_labels=True,
+        ),
+        static=True,
+    )
+    grid = all(s.low == s.high for s in stats)
+    if grid:
+        tick_x = [x + 0.5 * w for x, w in slots]
+        tick_text = [f"{s.low:g}" for s in stats]
+    else:
+        tick_x = [x for x, _ in slots] + [slots[-1][0] + slots[-1][1]]
+        edges = [s.low for s in stats] + [stats[-1].high]
+        d = _decimals(stats[0].high - stats[0].low)
+        tick_text = [f"{v:.{d}f}" for v in edges]
+    rec.log(
+        f"{base}/x_ticks",
+        rr.Points2D(
+            [[x, 2.0] for x in tick_x],
+            radii=[0.01],
+            colors=[AXIS_COLOR],
+            labels=tick_text,
+            show_labels=True,
+        ),
+        static=True,
+    )
+    title = f"{spec.name} [{unit}]" if unit != "-" else spec.name
+    rec.log(
+        f"{base}/x_title",
+        rr.Points2D(
+            [[0.5 * CHART_WIDTH, 7.0]],
+            radii=[0.01],
+            colors=[AXIS_COLOR],
+            labels=[title],
+            show_labels=True,
+        ),
+        static=True,
+    )
+    filled = [(s, s.rate, slot) for s, slot in zip(stats, slots, strict=True) if s.rate is not None]
+    if filled:
+        left = [x + 0.12 * w for _, _, (x, w) in filled]
+        width = [0.76 * w for _, _, (_, w) in filled]
+        height = [max(100.0 * r.rate * y, 0.3) for _, r, _ in filled]
+        mins, sizes, radii = _filled_boxes(left, width, height)
+        rec.log(
+            f"{base}/bars",
+            rr.Boxes2D(
+                mins=mins,
+                sizes=sizes,
+                radii=radii,
+                colors=[RATE_COLOR],
+                labels=[_bin_text(s, r, unit) for s, r, _ in filled],
+                show_labels=False,
+                draw_order=1.0,
+            ),
+            static=True,
+        )
+        whiskers = []
+        for _, r, (x, w) in filled:
+            xc, cap = x + 0.5 * w, 0.12 * w
+            lo, hi = -100.0 * r.low * y, -100.0 * r.high * y
+            whiskers += [[[xc, lo], [xc, hi]], [[xc - cap, lo], [xc + cap, lo]]]
+            whiskers.append([[xc - cap, hi], [xc + cap, hi]])
+        rec.log(
+            f"{base}/intervals",
+            rr.LineStrips2D(whiskers, radii=[0.3], colors=[WHISKER_COLOR], draw_order=2.0),
+            static=True,
+        )
+    rec.log(
+        f"{base}/counts",
+        rr.Points2D(
+            [
+                [x + 0.5 * w, -100.0 * (s.rate.high if s.rate else 0.0) * y - 6.5]
+                for s, (x, w) in zip(stats, slots, strict=True)
+            ],
+            radii=[0.01],
+            colors=[AXIS_COLOR if s.rate else EMPTY_COLOR for s in stats],
+            labels=[f"{s.successes}/{s.trials}" if s.trials else "none" for s in stats],
+            show_labels=True,
+            draw_order=4.0,
+        ),
+        static=True,
+    )
+
+
+def _decimals(width: float) -> int:
+    """Decimals that tell apart bin edges ``width`` apart (at least one below 10)."""
+    d = max(0, math.ceil(-math.log10(width)))
+    return 1 if d == 0 and width < 10.0 else d
+
+
+def _bin_text(s: BinStat, r: RateInterval, unit: str) -> str:
+    """Hover text of one bar (``r``: the bin's rate)."""
+    u = "" if unit == "-" else f" {unit}"
+    fails = ", ".join(f"{k} {v}" for k, v in s.failures.items())
+    return (
+        f"{s.parameter} {s.label}{u}: {s.successes} of {s.trials} succeeded "
+        f"({100 * r.rate:.0f} %, 95 % CI {100 * r.low:.0f}–{100 * r.high:.0f} %)"
+        + (f"; {fails}" if fails else "")
+    )
+
+
+def _fmt(value: float | None, scale: float) -> str:
+    if value is None:
+        return "–"
+    v = value * scale
+    return f"{v:.3g}" if math.isfinite(v) else str(v)
+
+
+def _outcome_markdown(
+    trials: Sequence[Mapping[str, Any]],
+    title: str,
+    plan: VaryPlan | None,
+    by_parameter: Mapping[str, Sequence[BinStat]] | None,
+    rerun: Mapping[str, str | None],
+    level: str = "#",
+) -> list[str]:
+    """Headline, failures with seeds and re-run commands, metrics, bins: markdown lines."""
+    rate = success_rate([bool(t["success"]) for t in trials])
+    lines = [
+        f"{level} {title}: {rate.successes} of {rate.trials} succeeded",
+        "",
+        f"**Success rate {100 * rate.rate:.1f} %** (95 % Wilson interval "
+        f"{100 * rate.low:.1f}–{100 * rate.high:.1f} %).",
+        "",
+    ]
+    failed: dict[str, list[Mapping[str, Any]]] = {}
+    for t in trials:
+        if not t["success"]:
+            failed.setdefault(outcome_of(t), []).append(t)
+    sub = level + "#"
+    if failed:
+        lines += [f"{sub} Failures", "", "| reason | trials | seeds |", "|---|---:|---|"]
+        for reason, group in sorted(failed.items(), key=lambda kv: -len(kv[1])):
+            seeds = sorted(int(t["seed"]) for t in group)
+            shown = " ".join(map(str, seeds[:20])) + (" …" if len(seeds) > 20 else "")
+            lines.append(f"| {reason} | {len(seeds)} | {shown} |")
+        lines.append("")
+        for reason, group in sorted(failed.items(), key=lambda kv: -len(kv[1])):
+            first = min(group, key=lambda t: int(t["seed"]))
+            text = first.get("failure_text") or first.get("detail")
+            command = rerun.get(reason)
+            lines.append(f"- **{reason}**, seed {first['seed']}" + (f": {text}" if text else ""))
+            if command:
+                lines.append(f"  re-run it alone: `{command}`")
+        lines.append("")
+    lines += [
+        f"{sub} Metrics",
+        "",
+        "| metric | trials | p50 | p95 ¹ | worst ¹ |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for m in METRICS:
+        if not any(m.key in t for t in trials):
+            continue
+        p = metric_summary(trials, m)
+        tail, worst = ("p5", "min") if m.low_is_worse else ("p95", "max")
+        name = f"{m.label} [{m.unit}]" if m.unit else m.label
+        note = " (successes)" if m.successes_only else ""
+        lines.append(
+            f"| {name}{note} | {p['count']} | {_fmt(p['p50'], m.scale)} | "
+            f"{_fmt(p[tail], m.scale)} | {_fmt(p[worst], m.scale)} |"
+        )
+    lines += [
+        "",
+        "Over the trials that moved (not refused before any physics). ¹ p95 and max; p5 and "
+        "min where low is worse (σ).",
+        "",
+    ]
+    for name, stats in (by_parameter or {}).items():
+        unit = plan.spec(name).parameter.unit if plan is not None else ""
+        lines += [
+            f"{sub} Success rate by {name}" + (f" [{unit}]" if unit and unit != "-" else ""),
+            "",
+            "| bin | trials | succeeded | rate | 95 % Wilson | failures |",
+            "|---|---:|---:|---:|---|---|",
+        ]
+        for st in stats:
+            if st.rate is None:
+                lines.append(f"| {st.label} | 0 | 0 | – | – | |")
+                continue
+            fails = ", ".join(f"{k} {v}" for k, v in st.failures.items())
+            lines.append(
+                f"| {st.label} | {st.trials} | {st.successes} | {100 * st.rate.rate:.0f} % | "
+                f"{100 * st.rate.low:.0f}–{100 * st.rate.high:.0f} % | {fails} |"
+            )
+        lines.append("")
+    return lines
+
+
+def _rerun_commands(
+    report: Mapping[str, Any], trials: Sequence[Mapping[str, Any]], plan: VaryPlan | None
+) -> dict[str, str | None]:
+    """The report's re-run command per failure reason; without one (a report not made by
+    :func:`pickplace.sweep.sweep.sweep_report`), one built from the first failed trial."""
+    out: dict[str, str | None] = {}
+    for reason, f in (report.get("failures") or {}).items():
+        out[reason] = f.get("rerun")
+    vary = "" if plan is None else "".join(f" --vary {s.flag()}" for s in plan.specs)
+    for t in sorted(trials, key=lambda t: int(t["seed"])):
+        reason = outcome_of(t)
+        if t["success"] or reason in out:
+            continue
+        scenario = t.get("scenario") or report.get("scenario", "?")
+        controller = t.get("controller") or report.get("controller", "?")
+        out[reason] = (
+            f"pickplace run --scenario {scenario} --controller {controller} "
+            f"--seed {t['seed']}{vary}"
+        )
+    return out
+
+
+def report_markdown(
+    trials: Sequence[Mapping[str, Any]],
+    report: Mapping[str, Any],
+    plan: VaryPlan | None = None,
+    by_parameter: Mapping[str, Sequence[BinStat]] | None = None,
+) -> str:
+    """The report as markdown: headline, failures with seeds and the command that re-runs
+    each, metrics, bins (per arm and the paired comparison with ``--compare``), then the
+    report dict (without its per-trial list)."""
+    scenario = report.get("scenario", trials[0].get("scenario", "?"))
+    controller = report.get("controller") or trials[0].get("controller", "?")
+    varied = plan.describe() if plan is not None else "nothing varied but the seed"
+    compare = report.get("compare")
+    title = sweep_title(
+        {
+            "scenario": scenario,
+            "robot": report.get("robot"),
+            "controller": controller if compare is None else report.get("controller"),
+            "compare": compare,
+            "compare_flag": report.get("compare_flag"),
+        }
+    )
+    lines: list[str] = []
+    if compare is None:
+        lines += _outcome_markdown(
+            trials,
+            title,
+            plan,
+            by_parameter,
+            _rerun_commands(report, trials, plan),
+        )
+        lines[4:4] = [f"Varied: {varied}.", ""]
+    else:
+        lines += [f"# {title}", "", f"Varied: {varied}.", ""]
+        for p in compare.get("paired", []):
+            lines += [
+                f"**{p['a']} − {p['b']}: {100 * p['difference']:+.1f} points** on "
+                f"{p['pairs']} paired seeds (95 % interval {100 * p['low']:+.1f} to "
+                f"{100 * p['high']:+.1f}; {p['interval_method']}); only {p['a']} succeeded on "
+                f"{p['a_only']}, only {p['b']} on {p['b_only']}; McNemar exact p = "
+                f"{p['mcnemar_p']:.3g}.",
+                "",
+            ]
+        for label, arm in compare["arms"].items():
+            group = [t for t in trials if t.get("arm") == label]
+            if not group:
+                continue
+            bins = (
+                success_by_parameter(plan, [plan.draw(int(t["seed"])) for t in group], group)
+                if plan is not None and plan.specs
+                else {}
+            )
+            rerun = {k: f.get("rerun") for k, f in arm["failures"].items()}
+            lines += _outcome_markdown(group, label, plan, bins, rerun, level="##")
+    shown = {k: v for k, v in report.items() if k != "trial_results"}
+    lines += ["## Report", "", "```json", json.dumps(shown, indent=2, default=str), "```", ""]
+    return "\n".join(lines)
+
+
+def eye_above(bin_: BinGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """Camera position and target [m] looking down at a bin's floor, from outside its -y side
+    (in the bin frame) at about 70° below the horizon, far enough to see the whole bin."""
+    R_WB = bin_.X_WB.rotation().as_matrix()
+    target = bin_.center_W
+    reach = 2.4 * float(np.max(bin_.inner_half_extents))
+    tilt = math.radians(70.0)
+    offset_B = np.array([0.0, -math.cos(tilt), math.sin(tilt)]) * reach
+    return target + R_WB @ offset_B, target
+
+
+def _arm_part(arm: str) -> str:
+    """An arm's label as an entity path part: ``controller=qp`` → ``controller-qp``."""
+    return str(rr.escape_entity_path_part(arm.replace("=", "-")))
+
+
+def chart_path(name: str, arm: str = "") -> str:
+    """Entity path of the chart of parameter ``name`` (of one arm in a comparison, e.g.
+    ``plots/controller-qp/success_by/brick_mass``)."""
+    return f"plots/{_arm_part(arm)}/success_by/{name}" if arm else f"plots/success_by/{name}"
+
+
+def build_sweep_blueprint(
+    plan: VaryPlan | None = None, scene: Scene | None = None, arms: Sequence[str] = ()
+) -> rrb.Blueprint:
+    """Bin 1 from above over one chart per varied parameter (left), the report (right).
+
+    Args:
+        plan: Varied parameters (one chart each).
+        scene: Scene whose source bin the camera looks at; default
+            :func:`~pickplace.sim.loader.load_scene`.
+        arms: The arms of a comparison (one chart per arm and parameter).
+    """
+    scene = scene or load_scene()
+    eye, target = eye_above(scene.source_bin)
+    bin_view = rrb.Spatial3DView(
+        name=f"Brick start per trial in {scene.source_bin.name}, coloured by outcome",
+        origin="world",
+        eye_controls=rrb.EyeControls3D(position=eye, look_target=target, eye_up=[0.0, 0.0, 1.0]),
+    )
+    (x_lo, x_hi), (y_lo, y_hi) = CHART_BOUNDS
+    charts = [
+        rrb.Spatial2DView(
+            name=(f"{arm}: " if arm else "")
+            + f"Success rate by {spec.name} (whiskers: 95 % Wilson interval)",
+            origin=chart_path(spec.name, arm),
+            visual_bounds=rrb.VisualBounds2D(x_range=(x_lo, x_hi), y_range=(y_lo, y_hi)),
+        )
+        for arm in (arms or ("",))
+        for spec in (plan.specs if plan is not None else ())
+    ]
+    left: Any = bin_view
+    if charts:
+        lower = charts[0] if len(charts) == 1 else rrb.Grid(*charts)
+        left = rrb.Vertical(bin_view, lower, row_shares=[3.0, 2.0 + 1.0 * (len(charts) > 2)])
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            left, rrb.TextDocumentView(name="Report", origin="report"), column_shares=[3.0, 2.0]
+        ),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed"),
+    )
+
+
+def _arms_of(trials: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The arms of a comparison in order of first appearance ([] without one)."""
+    arms: list[str] = []
+    for t in trials:
+        arm = t.get("arm")
+        if arm and arm not in arms:
+            arms.append(str(arm))
+    return arms
+
+
+def log_sweep(
+    rec: rr.RecordingStream,
+    trials: Sequence[Mapping[str, Any]],
+    report: Mapping[str, Any],
+    plan: VaryPlan | None = None,
+    draws: Sequence[ParameterDraw] = (),
+    scene: Scene | None = None,
+    bins: int | None = None,
+) -> dict[str, list[BinStat]]:
+    """Log a sweep into an open recording stream (see the module docstring).
+
+    In a comparison (trials with an ``arm``) each arm's trials are drawn under
+    ``world/trials/<arm>/`` and its charts at ``plots/<arm>/success_by/<parameter>``.
+
+    Args:
+        rec: The stream.
+        trials: Per-trial summaries (keys ``seed``, ``success``, ``failure``,
+            ``brick_start_xyz`` and any of :data:`METRICS`).
+        report: The sweep report (shown as JSON at the end of the text).
+        plan: The varied parameters, if any.
+        draws: One draw per seed (matched by seed); needed when ``plan`` varies something.
+        scene: Scene whose source bin is drawn; default :func:`~pickplace.sim.loader.load_scene`.
+        bins: Bins per uniform parameter (default: see :func:`pickplace.sim.vary.success_by_bin`).
+
+    Returns:
+        The success rate per bin of each varied parameter, as plotted (over every trial).
+
+    Raises:
+        InvalidInputError: No trials, or a trial without a draw when parameters vary.
+    """
+    if not trials:
+        raise InvalidInputError("a sweep recording needs at least one trial, got none")
+    scene = scene or load_scene()
+    by_seed = {d.seed: d for d in draws}
+    varied = plan is not None and bool(plan.specs)
+    by_parameter = (
+        success_by_parameter(plan, draws, trials, bins) if plan is not None and varied else {}
+    )
+    colors = outcome_colors([outcome_of(t) for t in trials])
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    _log_bin(rec, scene.source_bin, scene.p_W_base)
+    arms = _arms_of(trials)
+    legend: list[tuple[str, tuple[float, float, float]]] = []
+    for arm in arms or [""]:
+        group = [t for t in trials if t.get("arm", "") == arm] if arm else list(trials)
+        base = f"world/trials/{_arm_part(arm)}" if arm else "world/trials"
+        _log_trials(rec, group, by_seed, colors, base)
+        counts: dict[str, int] = {}
+        for t in group:
+            counts[outcome_of(t)] = counts.get(outcome_of(t), 0) + 1
+        ordered = sorted(counts.items(), key=lambda kv: (kv[0] != "success", -kv[1], kv[0]))
+        legend += [(f"{arm}: " * bool(arm) + f"{o} ({c})", colors[o]) for o, c in ordered]
+        if plan is not None and varied:
+            stats = by_parameter if not arm else success_by_parameter(plan, draws, group, bins)
+            for spec in plan.specs:
+                _log_bins(rec, spec, stats[spec.name], chart_path(spec.name, arm))
+    _log_legend(rec, scene.source_bin, legend)
+    text = report_markdown(trials, report, plan, by_parameter)
+    rec.log("report", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
+    return by_parameter
+
+
+def _default_recording_id(trials: Sequence[Mapping[str, Any]], report: Mapping[str, Any]) -> str:
+    seeds = [int(t["seed"]) for t in trials]
+    scenario = report.get("scenario", trials[0].get("scenario", "sweep"))
+    what = report.get("compare_flag") or report.get("controller") or trials[0].get("controller")
+    return f"sweep/{scenario}/{what or ''}/seeds-{min(seeds)}-{max(seeds)}"
+
+
+def encode_sweep(
+    trials: Sequence[Mapping[str, Any]],
+    report: Mapping[str, Any],
+    plan: VaryPlan | None = None,
+    draws: Sequence[ParameterDraw] = (),
+    scene: Scene | None = None,
+    bins: int | None = None,
+    recording_id: str | None = None,
+) -> bytes:
+    """The sweep's ``.rrd`` bytes with its blueprint (see :func:`log_sweep`), encoded in
+    memory (a sweep recording is small: points, charts and text).
+
+    Raises:
+        RecordingError: The recording could not be encoded.
+        InvalidInputError: See :func:`log_sweep`.
+    """
+    if not trials:
+        raise InvalidInputError("a sweep recording needs at least one trial, got none")
+    scene = scene or load_scene()
+    rid = recording_id or _default_recording_id(trials, report)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid)
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    stream = rr.binary_stream(recording=rec)
+    arms = _arms_of(trials)
+    rec.set_sinks(stream, default_blueprint=build_sweep_blueprint(plan, scene, arms))
+    try:
+        log_sweep(rec, trials, report, plan, draws, scene, bins)
+        data = stream.read(flush=True, flush_timeout_sec=ENCODE_TIMEOUT_S)
+    except RuntimeError as exc:
+        raise RecordingError(f"the sweep recording could not be encoded: {exc}") from exc
+    finally:
+        rec.disconnect()
+    return bytes(data or b"")
+
+
+def _check_complete(path: Path) -> None:
+    """Raise OutputError unless the ``.rrd`` at ``path`` reads back with its report."""
+    from rerun.chunk import RrdReader
+
+    try:
+        entities = RrdReader(path).store().schema().entity_paths()
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise OutputError(
+            f"the sweep recording does not read back ({' '.join(str(exc).split())[:200]})"
+        ) from None
+    if "/report" not in entities:
+        raise OutputError("the sweep recording lacks its report")
+
+
+def commit_recording(output: OutputFile, data: bytes) -> Path:
+    """Write ``data`` to ``output``'s temporary file, check that it reads back complete and
+    put it in place (an older file at the path is replaced only then).
+
+    Raises:
+        OutputError: The file could not be written or is incomplete (the temporary file is
+            deleted, an older file at the path is unchanged).
+    """
+    temp = output.open()
+    try:
+        with open(temp, "wb") as f:
+            f.write(data)
+        _check_complete(temp)
+    except OSError as exc:
+        output.discard()
+        raise OutputError(
+            f"cannot write the sweep recording '{output.path}': {exc.strerror or exc}; "
+            "an older file there is unchanged"
+        ) from None
+    except OutputError as exc:
+        output.discard()
+        raise OutputError(f"cannot write the sweep recording '{output.path}': {exc}") from None
+    output.commit()
+    return output.path
+
+
+def write_sweep_recording(
+    path: str | Path,
+    trials: Sequence[Mapping[str, Any]],
+    report: Mapping[str, Any],
+    plan: VaryPlan | None = None,
+    draws: Sequence[ParameterDraw] = (),
+    scene: Scene | None = None,
+    bins: int | None = None,
+    recording_id: str | None = None,
+) -> Path:
+    """Write a sweep to an ``.rrd`` file with its blueprint (see :func:`log_sweep`): encoded
+    in memory, written beside ``path`` and renamed onto it once it reads back complete
+    (:class:`~pickplace.outfile.OutputFile`: one writer per path).
+
+    Args:
+        path: The ``.rrd`` file.
+        trials: Per-trial summaries.
+        report: The sweep report.
+        plan: The varied parameters, if any.
+        draws: One draw per seed.
+        scene: Scene whose source bin is drawn.
+        bins: Bins per uniform parameter.
+        recording_id: Default ``sweep/SCENARIO/CONTROLLER/seeds-FIRST-LAST`` (the
+            ``--compare`` flag in place of the controller in a comparison).
+
+    Raises:
+        RecordingError: The recording could not be encoded or its folder does not exist.
+        OutputError: The file could not be written (another run writes it, disk full, ...).
+        InvalidInputError: See :func:`log_sweep`.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise RecordingError(f"cannot open the recording sink (file '{path}'): no such folder")
+    data = encode_sweep(trials, report, plan, draws, scene, bins, recording_id)
+    return commit_recording(OutputFile(path), data)
+
+
+def record_sweep(output: OutputFile, req: SweepRequest, report: Mapping[str, Any]) -> Path:
+    """Write the recording of a finished sweep ``req`` to ``output`` (opened by the caller
+    before the sweep, so that a second writer of the path is refused at once).
+
+    Raises:
+        OutputError: Nothing finished, or the file could not be written or encoded.
+    """
+    trials = report["trial_results"]
+    if not trials:
+        output.discard()
+        raise OutputError(f"no trial finished: nothing to record in '{output.path}'")
+    plan = req.vary
+    draws = [plan.draw(s) for s in sorted({int(t["seed"]) for t in trials})] if plan.specs else []
+    try:
+        data = encode_sweep(trials, report, plan, draws)
+    except RecordingError as exc:
+        output.discard()
+        raise OutputError(str(exc)) from None
+    return commit_recording(output, data)
+
+
+__all__ = [
+    "METRICS",
+    "Metric",
+    "bin_outline_W",
+    "build_sweep_blueprint",
+    "chart_path",
+    "commit_recording",
+    "encode_sweep",
+    "log_sweep",
+    "outcome_colors",
+    "outcome_of",
+    "record_sweep",
+    "report_markdown",
+    "write_sweep_recording",
+]

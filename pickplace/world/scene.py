@@ -1,0 +1,594 @@
+"""The scene a run simulates: a world with a robot composed into it, and the handles it needs.
+
+A scene is a world file — bins, brick, floor, lights, cameras and physics options
+(``scenes/world.xml``) — with a robot composed into it by :mod:`pickplace.robot.compose` (the arm at
+the origin, the gripper on its flange, calibrated in simulation). :func:`build_scene` resolves
+what the pipeline touches: the world's contract (:class:`WorldNames`: the brick and the two
+bins) and everything about the robot, sized from the robot itself (its joints, limits,
+actuators, gripper commands, pads and tool site: :class:`~pickplace.robot.compose.Robot`). It adds
+one
+robot–world contact sensor per world body. :func:`pickplace.sim.loader.load_scene` is the way to
+get a scene (cached by file content, home posture chosen); every missing world name raises
+:class:`~pickplace.errors.UnknownNameError` listing the names of that kind that do exist.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from mink.lie import SE3, SO3
+
+from pickplace.errors import SceneError, UnknownNameError
+from pickplace.robot.compose import Composition, Robot
+from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
+
+__all__ = [
+    "ROBOT_CONAFFINITY",
+    "ROBOT_CONTYPE",
+    "BinGeometry",
+    "Contact",
+    "Scene",
+    "WorldNames",
+    "build_scene",
+    "name_to_id",
+    "names_of",
+    "parse_scene",
+]
+
+_OBJ_KIND = {
+    mujoco.mjtObj.mjOBJ_JOINT: "joint",
+    mujoco.mjtObj.mjOBJ_ACTUATOR: "actuator",
+    mujoco.mjtObj.mjOBJ_SITE: "site",
+    mujoco.mjtObj.mjOBJ_BODY: "body",
+    mujoco.mjtObj.mjOBJ_GEOM: "geom",
+    mujoco.mjtObj.mjOBJ_KEY: "keyframe",
+    mujoco.mjtObj.mjOBJ_SENSOR: "sensor",
+}
+
+_OBJ_COUNT = {
+    mujoco.mjtObj.mjOBJ_JOINT: "njnt",
+    mujoco.mjtObj.mjOBJ_ACTUATOR: "nu",
+    mujoco.mjtObj.mjOBJ_SITE: "nsite",
+    mujoco.mjtObj.mjOBJ_BODY: "nbody",
+    mujoco.mjtObj.mjOBJ_GEOM: "ngeom",
+    mujoco.mjtObj.mjOBJ_KEY: "nkey",
+    mujoco.mjtObj.mjOBJ_SENSOR: "nsensor",
+}
+
+# Contact sensor fields the loop reads (bits of sensor_intprm[0]).
+_CONTACT_FOUND = 1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)
+_CONTACT_FORCE = 1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE)
+# sensor_intprm[1] of a contact sensor that keeps the contact with the largest force.
+_REDUCE_MAXFORCE = 2
+ROBOT_WORLD_SENSOR_PREFIX = "robot_world/"
+"""Names of the robot-world contact sensors :func:`build_scene` adds, one per world body."""
+
+
+def names_of(model: mujoco.MjModel, obj: mujoco.mjtObj) -> list[str]:
+    """Return the non-empty names of every object of type ``obj`` in ``model``."""
+    count = int(getattr(model, _OBJ_COUNT[obj]))
+    names = (mujoco.mj_id2name(model, obj, i) for i in range(count))
+    return [n for n in names if n]
+
+
+def name_to_id(model: mujoco.MjModel, obj: mujoco.mjtObj, name: str) -> int:
+    """Return the id of the object ``name`` of type ``obj``.
+
+    Raises:
+        UnknownNameError: The name does not exist; the message lists those that do.
+    """
+    idx = mujoco.mj_name2id(model, obj, name)
+    if idx < 0:
+        raise UnknownNameError(_OBJ_KIND[obj], name, names_of(model, obj))
+    return int(idx)
+
+
+@dataclass(frozen=True)
+class WorldNames:
+    """Names a world file must define (defaults: ``scenes/world.xml``).
+
+    The world also carries a site ``home_tool`` where a robot without a home posture is sent
+    by IK (:data:`pickplace.robot.compose.HOME_TOOL_SITE`), and, for the ``fault-obstacle``
+    scenario,
+    a mocap body ``obstacle`` (:class:`pickplace.sim.faults.Obstacle`).
+
+    Attributes:
+        brick_body: The brick's body (with a free joint).
+        brick_geom: The brick's box geom (the gripper is calibrated on its size).
+        source_bin: The bin the brick starts in: a body with a floor geom ``<bin>_floor`` and
+            four box walls.
+        target_bin: The bin it must end in, alike.
+    """
+
+    brick_body: str = "brick"
+    brick_geom: str = "brick"
+    source_bin: str = "bin1"
+    target_bin: str = "bin2"
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact (or a near contact within the geoms' margins) between two geoms.
+
+    Attributes:
+        geom: The robot's (or the held object's) geom.
+        other: The geom it touches.
+        dist: Signed distance [m]: negative when they penetrate.
+        pos_W: Contact point in world [m].
+    """
+
+    geom: int
+    other: int
+    dist: float
+    pos_W: np.ndarray
+
+
+@dataclass(frozen=True)
+class BinGeometry:
+    """An open-top bin: a floor box and four walls, described in the bin body's frame B.
+
+    Attributes:
+        name: Body name of the bin.
+        X_WB: Pose of the bin frame in world (z up, origin below the floor centre).
+        inner_half_extents: Half-lengths [m] of the free floor area along B's x and y,
+            measured between the inner faces of the walls.
+        floor_top_z: Height [m] of the floor's top face in world.
+        wall_top_z: Height [m] of the walls' top faces in world.
+    """
+
+    name: str
+    X_WB: SE3
+    inner_half_extents: np.ndarray
+    floor_top_z: float
+    wall_top_z: float
+
+    def to_bin_frame(self, p_W: np.ndarray) -> np.ndarray:
+        """Express world points ``p_W`` (..., 3) in the bin frame B."""
+        X_BW = self.X_WB.inverse()
+        R_BW = X_BW.rotation().as_matrix()
+        return np.asarray(p_W) @ R_BW.T + X_BW.translation()
+
+    def contains_xy(self, p_W: np.ndarray, margin: float = 0.0) -> bool:
+        """True if every point of ``p_W`` (N, 3) lies over the floor, ``margin`` [m] inside."""
+        p_B = self.to_bin_frame(np.atleast_2d(p_W))
+        limit = self.inner_half_extents - margin
+        return bool(np.all(np.abs(p_B[:, :2]) <= limit))
+
+    @property
+    def center_W(self) -> np.ndarray:
+        """Centre of the floor's top face in world [m]."""
+        p = self.X_WB.translation().copy()
+        p[2] = self.floor_top_z
+        return p
+
+
+def _bin_geometry(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> BinGeometry:
+    body_id = name_to_id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+    geom_ids = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body_id]
+    floor_name = f"{name}_floor"
+    floor_id = name_to_id(model, mujoco.mjtObj.mjOBJ_GEOM, floor_name)
+    walls = [
+        g for g in geom_ids if g != floor_id and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX
+    ]
+    if len(walls) < 4:
+        raise SceneError(
+            f"bin '{name}' needs a floor geom '{floor_name}' and 4 box walls, "
+            f"found {len(walls)} walls"
+        )
+    # Inner faces: for each wall, the face nearer the bin centre along its thin axis.
+    inner = np.array([np.inf, np.inf])
+    wall_top = -np.inf
+    for g in walls:
+        pos, size = model.geom_pos[g], model.geom_size[g]
+        axis = int(np.argmin(size[:2]))  # the wall's thickness direction in B
+        inner[axis] = min(inner[axis], abs(pos[axis]) - size[axis])
+        wall_top = max(wall_top, pos[2] + size[2])
+    floor_top = model.geom_pos[floor_id][2] + model.geom_size[floor_id][2]
+    X_WB = SE3.from_rotation_and_translation(
+        SO3(np.array(data.xquat[body_id])), np.array(data.xpos[body_id])
+    )
+    base_z = float(data.xpos[body_id][2])
+    return BinGeometry(
+        name=name,
+        X_WB=X_WB,
+        inner_half_extents=inner,
+        floor_top_z=base_z + float(floor_top),
+        wall_top_z=base_z + float(wall_top),
+    )
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A compiled scene, the robot in it and the ids of everything the pipeline touches.
+
+    The robot's arrays are sized by the robot: ``n`` arm joints (:attr:`n_joints`), as many
+    gripper actuators and joints as its gripper has, any number of pads per side. The model
+    may be changed by faults (a mass, a gain): :func:`pickplace.sim.loader.load_scene` gives every
+    run its own copy; :attr:`arm_model` is shared and never changed.
+
+    Attributes:
+        model: The compiled MuJoCo model.
+        path: The world file.
+        robot: The composed robot (ids refer to ``model``; its ``q_home`` is the scene's home).
+        names: The world names that were resolved.
+        arm_model: The scene with only the arm joints left (nq = nv = n), for the IK; bodies,
+            sites and geometry unchanged, so the tool site's kinematics equal the simulation's.
+        gripper_qpos_adr: qpos addresses of the gripper's joints.
+        pad_force_sensor_adr: sensordata addresses of every pad–brick contact sensor, the
+            +y ("left") side's first; each holds ``pad_force_slots`` rows of
+            [found, f_normal, f_t1, f_t2] (force on the pad in the contact frame [N]).
+        pad_sensor_side: Per pad sensor, 0 for the +y side and 1 for the -y side.
+        brick_body_id: Free body of the brick.
+        brick_geom_id: Box geom of the brick.
+        brick_qpos_adr: First qpos address of the brick's free joint (xyz, wxyz).
+        brick_dof_adr: First dof address of the brick's free joint.
+        brick_half_extents: Half sizes of the brick box [m].
+        brick_mass: Mass of the brick [kg].
+        source_bin: Bin the brick starts in.
+        target_bin: Bin the brick must end in.
+        robot_root_body_ids: The bodies under the world whose subtrees are the robot.
+        robot_body_mask: Per body, True for the robot's bodies (arm and gripper).
+        world_contact_body_ids: Bodies outside the robot and the brick that can collide: the
+            world the robot must not touch.
+        robot_world_sensor_adr: sensordata addresses of the robot-world contact sensors, one
+            per robot root and world contact body, each [found, f_normal, f_t1, f_t2] of the
+            contact with the largest force (force on the robot in the contact frame [N]).
+    """
+
+    model: mujoco.MjModel
+    path: Path
+    robot: Robot
+    names: WorldNames
+    arm_model: mujoco.MjModel = field(repr=False, compare=False)
+    gripper_qpos_adr: np.ndarray
+    pad_force_sensor_adr: np.ndarray
+    pad_sensor_side: np.ndarray
+    brick_body_id: int
+    brick_geom_id: int
+    brick_qpos_adr: int
+    brick_dof_adr: int
+    brick_half_extents: np.ndarray
+    brick_mass: float
+    source_bin: BinGeometry
+    target_bin: BinGeometry
+    robot_root_body_ids: np.ndarray
+    robot_body_mask: np.ndarray = field(repr=False)
+    world_contact_body_ids: np.ndarray
+    robot_world_sensor_adr: np.ndarray
+
+    # ------------------------------------------------------------------ the arm
+
+    @property
+    def n_joints(self) -> int:
+        """Number of arm joints."""
+        return self.robot.n_joints
+
+    @property
+    def arm_joint_names(self) -> tuple[str, ...]:
+        """Names of the arm joints in the scene, base to flange."""
+        return self.robot.arm_joint_names
+
+    @property
+    def arm_joint_ids(self) -> np.ndarray:
+        """Joint ids of the arm joints, base to flange."""
+        return self.robot.arm_joint_ids
+
+    @property
+    def arm_qpos_adr(self) -> np.ndarray:
+        """qpos addresses of the arm joints."""
+        return self.robot.arm_qpos_adr
+
+    @property
+    def arm_dof_adr(self) -> np.ndarray:
+        """dof (qvel) addresses of the arm joints."""
+        return self.robot.arm_dof_adr
+
+    @property
+    def q_min(self) -> np.ndarray:
+        """Lower joint limits [rad or m]; -inf for continuous joints."""
+        return self.robot.q_min
+
+    @property
+    def q_max(self) -> np.ndarray:
+        """Upper joint limits [rad or m]; +inf for continuous joints."""
+        return self.robot.q_max
+
+    @property
+    def v_max(self) -> np.ndarray:
+        """Joint speed limits [rad/s or m/s], from the robot description."""
+        return self.robot.v_max
+
+    @property
+    def a_max(self) -> np.ndarray | None:
+        """Joint acceleration limits [rad/s²], from the robot description, or None."""
+        return self.robot.a_max
+
+    @property
+    def arm_actuator_ids(self) -> np.ndarray:
+        """Position actuator of each arm joint."""
+        return self.robot.arm_actuator_ids
+
+    @property
+    def q_home(self) -> np.ndarray:
+        """Home posture of the arm (the ``home`` keyframe's) [rad]."""
+        return self.robot.q_home
+
+    @property
+    def home_key_id(self) -> int:
+        """Keyframe with the home posture, the gripper open."""
+        return self.robot.home_key_id
+
+    @property
+    def p_W_base(self) -> np.ndarray:
+        """Anchor of the first arm joint (the base axis) in world [m]."""
+        return self.robot.p_W_base
+
+    @property
+    def tool_site_id(self) -> int:
+        """Calibrated tool site: z along the approach, y along the closing axis."""
+        return self.robot.tool_site_id
+
+    @property
+    def tool_site_name(self) -> str:
+        """Name of the tool site."""
+        return self.robot.tool_site_name
+
+    # ------------------------------------------------------------------ the gripper
+
+    @property
+    def gripper_actuator_ids(self) -> np.ndarray:
+        """The gripper's actuators (order of :meth:`ctrl_for_width`)."""
+        return self.robot.gripper_actuator_ids
+
+    @property
+    def gripper_joint_ids(self) -> np.ndarray:
+        """The gripper's joints (order of :meth:`gripper_qpos_for_width`)."""
+        return self.robot.gripper_joint_ids
+
+    @property
+    def gripper_open_width(self) -> float:
+        """Pad gap at the open command [m] (calibrated)."""
+        return self.robot.open_width
+
+    @property
+    def squeeze_force(self) -> float:
+        """Squeeze per jaw [N] a grasp is judged against: measured in calibration, or the
+        description's ``grip_force``."""
+        return self.robot.squeeze_force
+
+    @property
+    def pad_geom_ids(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pad geoms of the +y ("left") and the -y ("right") side of the tool frame."""
+        return self.robot.pad_geom_ids
+
+    @property
+    def pad_force_slots(self) -> int:
+        """Contacts each pad sensor reports."""
+        return self.robot.pad_force_slots
+
+    def ctrl_for_width(self, width: float) -> np.ndarray:
+        """Gripper command (one value per gripper actuator) for a pad gap of ``width`` [m];
+        at or below the closed width the closed command (full squeeze on an object)."""
+        return self.robot.ctrl_for_width(width)
+
+    def ctrl_for_widths(self, widths: np.ndarray) -> np.ndarray:
+        """:meth:`ctrl_for_width` of each of ``widths`` (k,), shape (k, gripper actuators)."""
+        return self.robot.ctrl_for_widths(widths)
+
+    def gripper_qpos_for_width(self, width: float) -> np.ndarray:
+        """Gripper joint positions of the free fingers at gap ``width`` [m], for
+        :attr:`gripper_qpos_adr` (what a kinematic copy of the scene sets)."""
+        return self.robot.qpos_for_width(width)
+
+    def gripper_gap(self, data: mujoco.MjData) -> float:
+        """Gap between the innermost pad faces along the tool's y axis [m], now."""
+        return self.robot.gap(data)
+
+    def gripper_gaps(
+        self, body_pos: np.ndarray, body_quat: np.ndarray, R_WG: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The pad gap [m] from logged body poses (..., nbody, 3) and (..., nbody, 4, wxyz),
+        vectorised over the leading axes; ``R_WG`` (..., 3, 3), the tool site's rotation at
+        the same state, if known, saves computing the closing axis."""
+        y_W = None if R_WG is None else R_WG[..., :, 1]
+        return self.robot.gap_from_body_poses(body_pos, body_quat, y_W)
+
+    def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
+        """The pad sensors' contact slots from sensordata of shape (..., nsensordata).
+
+        Returns:
+            Shape (..., sensors, pad_force_slots, 4): one row per contact slot of
+            [found, f_normal, f_t1, f_t2] (contact count; force on the pad in the contact
+            frame [N]; unused slots are zero), sensors in :attr:`pad_force_sensor_adr` order.
+        """
+        n = 4 * self.pad_force_slots
+        rows = [sensordata[..., a : a + n] for a in self.pad_force_sensor_adr.tolist()]
+        shape = (*sensordata.shape[:-1], len(rows), self.pad_force_slots, 4)
+        return np.stack(rows, axis=-2).reshape(shape)
+
+    def pad_normal_forces(self, sensordata: np.ndarray) -> np.ndarray:
+        """Normal force [N] of the brick on the +y and the -y pads, shape (..., 2), from
+        sensordata of shape (..., nsensordata)."""
+        per_sensor = self.pad_sensor_rows(sensordata)[..., 1].sum(axis=-1)
+        sides = np.zeros((len(self.pad_sensor_side), 2))
+        sides[np.arange(len(self.pad_sensor_side)), self.pad_sensor_side] = 1.0
+        return np.asarray(per_sensor @ sides)
+
+    # ------------------------------------------------------------------ the world
+
+    @property
+    def brick_width(self) -> float:
+        """Width of the brick across the fingers (its y extent) [m]."""
+        return 2.0 * float(self.brick_half_extents[1])
+
+    def is_robot_geom(self, geom_id: int) -> bool:
+        """True if geom ``geom_id`` belongs to a body of the robot (arm or gripper)."""
+        return bool(self.robot_body_mask[self.model.geom_bodyid[geom_id]])
+
+    def is_world_geom(self, geom_id: int) -> bool:
+        """True if geom ``geom_id`` is part of the world the robot must not touch (a geom of
+        :attr:`world_contact_body_ids`)."""
+        return bool(np.isin(self.model.geom_bodyid[geom_id], self.world_contact_body_ids))
+
+    def robot_world_contacts(self, model: mujoco.MjModel, data: mujoco.MjData) -> list[Contact]:
+        """Contacts in ``data`` between a robot geom and a world geom, deepest first.
+
+        ``model`` and ``data`` may be this scene's or a kinematic copy of it (same geoms),
+        after :func:`mujoco.mj_collision` (contacts within the geoms' margins are included,
+        with their positive distance).
+        """
+        out = []
+        bodies = model.geom_bodyid
+        world = set(self.world_contact_body_ids.tolist())
+        for i in range(data.ncon):
+            c = data.contact[i]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            if self.robot_body_mask[bodies[g1]] and bodies[g2] in world:
+                robot, other = g1, g2
+            elif self.robot_body_mask[bodies[g2]] and bodies[g1] in world:
+                robot, other = g2, g1
+            else:
+                continue
+            out.append(Contact(robot, other, float(c.dist), np.array(c.pos)))
+        return sorted(out, key=lambda c: c.dist)
+
+    def geom_name(self, geom_id: int) -> str:
+        """Name of geom ``geom_id`` (``geom<id>`` when it has none)."""
+        return mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, geom_id) or f"geom{geom_id}"
+
+    def set_brick_pose(self, data: mujoco.MjData, X_WO: SE3) -> None:
+        """Write the brick's pose ``X_WO`` into ``data.qpos`` (call mj_forward afterwards)."""
+        adr = self.brick_qpos_adr
+        data.qpos[adr : adr + 3] = X_WO.translation()
+        data.qpos[adr + 3 : adr + 7] = X_WO.rotation().wxyz  # position and quaternion
+
+    def make_data(self) -> mujoco.MjData:
+        """Return fresh MjData reset to the home keyframe."""
+        data = mujoco.MjData(self.model)
+        mujoco.mj_resetDataKeyframe(self.model, data, self.home_key_id)
+        mujoco.mj_forward(self.model, data)
+        return data
+
+
+def parse_scene(path: Path) -> mujoco.MjSpec:
+    """Parse a world file into a spec, turning every failure into a :class:`SceneError`."""
+    path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
+    if not path.exists():
+        raise SceneError(f"scene file '{path}' does not exist; valid: an MJCF world file")
+    if not path.is_file():
+        raise SceneError(f"scene path '{path}' is not a file; valid: an MJCF world file")
+    try:
+        return mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
+        detail = " ".join(str(exc).split())
+        raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
+
+
+def _world_contact_bodies(model: mujoco.MjModel, robot: np.ndarray, brick_body: int) -> list[int]:
+    """Bodies outside the robot and the brick that have geoms: the world the robot must not
+    touch (the world body's floor, the bins, an obstacle a fault may bring in)."""
+    has_geom = np.zeros(model.nbody, dtype=bool)
+    has_geom[model.geom_bodyid] = True
+    return [b for b in range(model.nbody) if has_geom[b] and not robot[b] and b != brick_body]
+
+
+def _add_robot_world_sensors(
+    spec: mujoco.MjSpec, model: mujoco.MjModel, roots: np.ndarray, bodies: list[int]
+) -> list[str]:
+    """One contact sensor per robot root and world body: the root's subtree against that body,
+    reporting the number of contacts and the largest normal force (``found force``,
+    ``maxforce``)."""
+    names = []
+    taken = {s.name for s in spec.sensors}
+    for root_id in roots.tolist():
+        root = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, root_id)
+        for b in bodies:
+            body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or "world"
+            name = f"{ROBOT_WORLD_SENSOR_PREFIX}{body}"
+            if len(roots) > 1:
+                name += f"/{root}"
+            if name in taken:
+                raise SceneError(f"the world already has a sensor '{name}'; valid: another name")
+            spec.add_sensor(
+                name=name,
+                type=mujoco.mjtSensor.mjSENS_CONTACT,
+                objtype=mujoco.mjtObj.mjOBJ_XBODY,  # subtree of the robot's root
+                objname=root,
+                reftype=mujoco.mjtObj.mjOBJ_BODY,
+                refname=body,
+                intprm=[_CONTACT_FOUND | _CONTACT_FORCE, _REDUCE_MAXFORCE, 1],
+            )
+            names.append(name)
+    return names
+
+
+def build_scene(composition: Composition, path: Path, names: WorldNames | None = None) -> Scene:
+    """Resolve a composed scene: the world's names, the robot, the robot–world sensors.
+
+    Args:
+        composition: The world with the robot composed into it
+        (:func:`pickplace.robot.compose.load_robot`);
+            its spec is copied, not changed.
+        path: The world file (reported in the scene).
+        names: World names to resolve; default :class:`WorldNames`.
+
+    Raises:
+        SceneError: The brick or a bin is structurally wrong, or the scene does not compile.
+        UnknownNameError: A world name is missing (the message lists those that exist).
+    """
+    names = names or WorldNames()
+    robot = composition.robot
+    model = composition.model
+    obj = mujoco.mjtObj
+    brick_body = name_to_id(model, obj.mjOBJ_BODY, names.brick_body)
+    brick_geom = name_to_id(model, obj.mjOBJ_GEOM, names.brick_geom)
+    brick_jnt = int(model.body_jntadr[brick_body])
+    if brick_jnt < 0 or model.jnt_type[brick_jnt] != mujoco.mjtJoint.mjJNT_FREE:
+        raise SceneError(f"brick body '{names.brick_body}' must have a free joint")
+    if model.geom_type[brick_geom] != mujoco.mjtGeom.mjGEOM_BOX:
+        raise SceneError(f"brick geom '{names.brick_geom}' must be a box")
+    mask = np.zeros(model.nbody, dtype=bool)
+    mask[robot.robot_body_ids] = True
+    roots = np.unique(model.body_rootid[robot.robot_body_ids])
+    world_bodies = _world_contact_bodies(model, mask, brick_body)
+    spec = composition.spec.copy()
+    sensor_names = _add_robot_world_sensors(spec, model, roots, world_bodies)
+    try:
+        model = spec.compile()  # the same model, with the robot-world contact sensors
+    except ValueError as exc:
+        detail = " ".join(str(exc).split())
+        raise SceneError(f"scene file '{path}' with the robot does not compile: {detail}") from exc
+    world_sensor_adr = np.array(
+        [model.sensor_adr[name_to_id(model, obj.mjOBJ_SENSOR, n)] for n in sensor_names],
+        dtype=int,
+    )
+    pad_adr = np.concatenate(robot.pad_force_sensor_adr).astype(int)
+    pad_side = np.concatenate(
+        [np.full(len(adr), side, dtype=int) for side, adr in enumerate(robot.pad_force_sensor_adr)]
+    )
+    data = robot.make_data(model)
+    return Scene(
+        model=model,
+        path=path,
+        robot=robot,
+        names=names,
+        arm_model=composition.arm_model,
+        gripper_qpos_adr=model.jnt_qposadr[robot.gripper_joint_ids].copy(),
+        pad_force_sensor_adr=pad_adr,
+        pad_sensor_side=pad_side,
+        brick_body_id=brick_body,
+        brick_geom_id=brick_geom,
+        brick_qpos_adr=int(model.jnt_qposadr[brick_jnt]),
+        brick_dof_adr=int(model.jnt_dofadr[brick_jnt]),
+        brick_half_extents=model.geom_size[brick_geom].copy(),
+        brick_mass=float(model.body_mass[brick_body]),
+        source_bin=_bin_geometry(model, data, names.source_bin),
+        target_bin=_bin_geometry(model, data, names.target_bin),
+        robot_root_body_ids=roots,
+        robot_body_mask=mask,
+        world_contact_body_ids=np.array(world_bodies, dtype=int),
+        robot_world_sensor_adr=world_sensor_adr,
+    )
