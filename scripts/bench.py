@@ -172,7 +172,7 @@ def cycle_time(sim: Any) -> dict[str, float]:
     """The nominal run's cycle time against its joint-speed bound, and its quality figures."""
     log, n = sim.log, sim.ticks
     keyframes = sim.task.trajectory.keyframes
-    args = (keyframes, sim.dt, log.q_cmd[:n], sim.scene.v_max)
+    args = (keyframes, sim.dt, log.q_cmd[:n], sim.scene.robot.v_max)
     bound, at_speed_limits = cycle_time_bound(*args), cycle_time_at_speed_limits(*args)
     slip = log.slip[:n]
     cycle = sim.task.trajectory.end_time

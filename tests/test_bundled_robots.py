@@ -43,7 +43,7 @@ REACH_HEIGHT = 0.30  # the singular reach's tool height [m]
 
 def test_three_robots_are_bundled_with_six_and_seven_joints() -> None:
     assert {"iiwa14-wsg50", "panda-hand", "ur5e-2f85"} <= set(ROBOTS)
-    assert {load_scene(robot=r).n_joints for r in ROBOTS} == {6, 7}
+    assert {load_scene(robot=r).robot.n_joints for r in ROBOTS} == {6, 7}
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
@@ -94,8 +94,10 @@ def _reach_error(scene: Scene, target: SE3) -> float:
     """Position error [m] after IK from home towards ``target`` (position and orientation,
     within the joint limits, steps capped at 0.1 rad)."""
     model = scene.arm_model
-    cfg = mink.Configuration(model, scene.q_home.copy())
-    task = mink.FrameTask(scene.tool_site_name, "site", position_cost=1.0, orientation_cost=1.0)
+    cfg = mink.Configuration(model, scene.robot.q_home.copy())
+    task = mink.FrameTask(
+        scene.robot.tool_site_name, "site", position_cost=1.0, orientation_cost=1.0
+    )
     task.set_target(target)
     limits = [mink.ConfigurationLimit(model)]
     for _ in range(400):
@@ -112,11 +114,11 @@ def test_full_stretch_is_where_the_tool_pointing_down_stops_reaching(robot: str)
     scene = load_scene(robot=robot)
     r = full_stretch_distance(scene, REACH_HEIGHT)
     kin = ArmKinematics(scene)
-    kin.update(scene.q_home)
+    kin.update(scene.robot.q_home)
     X_home = kin.X_WG()
-    p = X_home.translation() - scene.p_W_base
+    p = X_home.translation() - scene.robot.p_W_base
     R = top_down_rotation(yaw_of(X_home.rotation()) + math.pi / 2 - math.atan2(p[1], p[0]))
-    base = scene.p_W_base
+    base = scene.robot.p_W_base
     inside, outside = (
         _reach_error(
             scene,
@@ -135,7 +137,7 @@ def test_singular_reach_qp_stays_within_limits_and_pinv_exceeds_a_speed_limit(ro
     scene, task, sim = prepare(RunRequest(scenario="singular-reach", robot=robot))
     far = task.trajectory.keyframes[3]
     assert far.name == "stretched"
-    p_far = far.X_WG.translation() - scene.p_W_base
+    p_far = far.X_WG.translation() - scene.robot.p_W_base
     beyond = math.hypot(p_far[0], p_far[1]) - full_stretch_distance(scene, REACH_HEIGHT)
     assert beyond == pytest.approx(REACH_OVERSHOOT, abs=1e-9)
     result = sim.run()
@@ -154,9 +156,9 @@ def toy_robot(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_a_robot_of_our_own_picks_and_places(toy_robot: Path) -> None:
     scene = load_scene(robot=toy_robot)
-    assert scene.robot.name == "toy-6dof" and scene.n_joints == 6
+    assert scene.robot.name == "toy-6dof" and scene.robot.n_joints == 6
     assert scene.robot.home_source == "ik"
-    assert any(np.array_equal(scene.q_home, q) for q in scene.robot.home_candidates)
+    assert any(np.array_equal(scene.robot.q_home, q) for q in scene.robot.home_candidates)
     result = run(RunRequest(scenario="pick-place", robot=str(toy_robot)))
     assert result.success, result.summary()["events"][-2:]
     assert result.robot == "toy-6dof"
@@ -166,9 +168,9 @@ def test_a_robot_of_our_own_picks_and_places(toy_robot: Path) -> None:
 def test_the_preflight_chooses_among_home_candidates(scene: Scene) -> None:
     """A candidate with its last joint at the pre-flight's limit margin, though listed first,
     loses to one whose nominal plan is feasible."""
-    good = scene.q_home
+    good = scene.robot.q_home
     bad = good.copy()
-    bad[-1] = scene.q_max[-1] - 0.005
+    bad[-1] = scene.robot.q_max[-1] - 0.005
     assert np.array_equal(choose_home(scene, (bad, good)), good)
     assert np.array_equal(choose_home(scene, (good, bad)), good)
 

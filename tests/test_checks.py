@@ -38,7 +38,7 @@ def _context(scene: Scene) -> CheckContext:
 
 def _log(scene: Scene, n: int = 20) -> TickLog:
     log = TickLog(scene, n, DT)
-    log.q_cmd[:] = scene.q_home
+    log.q_cmd[:] = scene.robot.q_home
     log.qpos[:] = scene.make_data().qpos
     log.derive(0, n)
     return log
@@ -76,13 +76,13 @@ def test_no_qp_solution_and_lost_tracking_are_ik_failures(scene: Scene) -> None:
 def test_speed_and_position_limits_name_the_joint_and_the_excess(scene: Scene) -> None:
     ctx, log = _context(scene), _log(scene)
     j = 3
-    log.qdot_cmd[6, j] = 1.5 * scene.v_max[j]
+    log.qdot_cmd[6, j] = 1.5 * scene.robot.v_max[j]
     log.derive(0, 20)
     f = SpeedLimitCheck(ctx).first_failure(log, 0, 20)
     assert f is not None and (f.tick, f.reason) == (6, FailureReason.LIMIT_VIOLATED)
-    assert scene.arm_joint_names[j] in f.text and "1.5000x" in f.text
+    assert scene.robot.arm_joint_names[j] in f.text and "1.5000x" in f.text
     tol = ctx.criteria.position_limit_tolerance
-    log.q_cmd[11, 0] = scene.q_max[0] + 2 * tol
+    log.q_cmd[11, 0] = scene.robot.q_max[0] + 2 * tol
     log.derive(0, 20)
     f = PositionLimitCheck(ctx).first_failure(log, 0, 20)
     assert f is not None and f.tick == 11 and f"{2 * tol:.4f} rad past" in f.text

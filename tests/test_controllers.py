@@ -23,7 +23,7 @@ DT = 0.01
 
 def _targets(scene, rng: np.random.Generator, n: int):
     ctrl = QPController(scene, DT)
-    ctrl.kinematics.update(scene.q_home)
+    ctrl.kinematics.update(scene.robot.q_home)
     X0 = ctrl.kinematics.X_WG()
     for _ in range(n):
         dR = SO3.exp(rng.normal(0.0, 0.2, 3))
@@ -45,7 +45,7 @@ def test_fast_qp_equals_mink_solve_ik_on_the_same_problem(scene) -> None:
     fast = QPController(scene, DT, backend="fast")
     ref = QPController(scene, DT, backend="mink")
     rng = np.random.default_rng(0)
-    q = scene.q_home.copy()
+    q = scene.robot.q_home.copy()
     for X, V in _targets(scene, rng, 300):
         q = _step_both(fast, ref, q, X, V, atol=1e-8)
 
@@ -54,7 +54,7 @@ def test_fast_qp_matches_a_direct_mink_call(scene) -> None:
     """Independent of our wrapper: build mink's problem by hand and solve it."""
     ctrl = QPController(scene, DT)
     rng = np.random.default_rng(1)
-    q = scene.q_home.copy()
+    q = scene.robot.q_home.copy()
     X, V = next(iter(_targets(scene, rng, 1)))
     res = ctrl.command(q, X, V)
     cfg = mink.Configuration(ctrl.kinematics.model, q=q)
@@ -65,19 +65,19 @@ def test_fast_qp_matches_a_direct_mink_call(scene) -> None:
 def test_qp_never_exceeds_the_joint_speed_limits(scene) -> None:
     ctrl = QPController(scene, DT)
     rng = np.random.default_rng(2)
-    q = scene.q_home.copy()
+    q = scene.robot.q_home.copy()
     for X, V in _targets(scene, rng, 200):
         res = ctrl.command(q, X, 20.0 * V)  # far faster than the arm can go
-        assert np.all(np.abs(res.qdot) <= scene.v_max * (1 + 1e-6))
+        assert np.all(np.abs(res.qdot) <= scene.robot.v_max * (1 + 1e-6))
         q = q + res.qdot * DT
-        assert np.all(q >= scene.q_min) and np.all(q <= scene.q_max)
+        assert np.all(q >= scene.robot.q_min) and np.all(q <= scene.robot.q_max)
 
 
 def test_pinv_and_dls_follow_their_formulas(scene) -> None:
     pinv = PinvController(scene, DT, cutoff=1e-6)
     dls = DLSController(scene, DT, damping=0.1)
     rng = np.random.default_rng(3)
-    q = scene.q_home.copy()
+    q = scene.robot.q_home.copy()
     for X, V in _targets(scene, rng, 20):
         a = pinv.command(q, X, V)
         np.testing.assert_allclose(a.qdot, np.linalg.pinv(a.J_WG) @ a.V_cmd, atol=1e-10)
@@ -100,8 +100,8 @@ def test_near_the_stretched_singularity_pinv_explodes_and_qp_stays_limited(scene
         ctrl.kinematics.update(q)
         X = ctrl.kinematics.X_WG()
         results[name] = ctrl.command(q, X, V)
-    assert np.max(np.abs(results["pinv"].qdot) / scene.v_max) > 5.0
-    assert np.max(np.abs(results["qp"].qdot) / scene.v_max) <= 1 + 1e-6
+    assert np.max(np.abs(results["pinv"].qdot) / scene.robot.v_max) > 5.0
+    assert np.max(np.abs(results["qp"].qdot) / scene.robot.v_max) <= 1 + 1e-6
     assert results["qp"].status is IKStatus.LIMITED
 
 
@@ -117,7 +117,7 @@ def test_result_x_WG_is_the_forward_kinematics_of_q(scene, name: str) -> None:
     ctrl = make_controller(name, scene, DT)
     kin = ArmKinematics(scene)
     rng = np.random.default_rng(4)
-    q = scene.q_home.copy()
+    q = scene.robot.q_home.copy()
     for X, V in _targets(scene, rng, 20):
         res = ctrl.command(q, X, V)
         kin.update(q)
@@ -138,7 +138,7 @@ def test_successive_results_do_not_alias(scene, name: str) -> None:
     ctrl = make_controller(name, scene, DT)
     rng = np.random.default_rng(5)
     (X1, V1), (X2, V2) = list(_targets(scene, rng, 2))
-    q1 = scene.q_home.copy()
+    q1 = scene.robot.q_home.copy()
     q2 = q1 + 0.05
     first = ctrl.command(q1, X1, V1)
     fields = ("qdot", "V_cmd", "error", "J_WG", "x_WG")
@@ -156,7 +156,7 @@ def test_fast_qp_follows_task_costs_gains_and_targets_changed_on_the_tasks(scene
     fast = QPController(scene, DT, backend="fast")
     ref = QPController(scene, DT, backend="mink")
     rng = np.random.default_rng(6)
-    q = scene.q_home.copy()
+    q = scene.robot.q_home.copy()
     changes = [
         lambda c: c.frame_task.set_position_cost(2.0),
         lambda c: c.frame_task.set_orientation_cost(np.array([0.5, 1.0, 3.0])),
@@ -165,7 +165,7 @@ def test_fast_qp_follows_task_costs_gains_and_targets_changed_on_the_tasks(scene
         lambda c: c.posture_task.set_cost(np.linspace(1e-3, 1e-1, 7)),
         lambda c: setattr(c.posture_task, "gain", 0.5),
         lambda c: setattr(c.posture_task, "lm_damping", 2.0),
-        lambda c: c.posture_task.set_target(scene.q_home + 0.2),
+        lambda c: c.posture_task.set_target(scene.robot.q_home + 0.2),
     ]
     targets = list(_targets(scene, rng, 5 * (len(changes) + 1)))
     for k, (X, V) in enumerate(targets):
@@ -183,7 +183,7 @@ def test_fast_qp_posture_through_mink_equals_the_hinge_shortcut(scene) -> None:
     general._posture_is_difference = False
     general._task_weights_key = ()  # recompute the constant parts for the general path
     rng = np.random.default_rng(7)
-    q = scene.q_home.copy()
+    q = scene.robot.q_home.copy()
     for X, V in _targets(scene, rng, 50):
         q = _step_both(shortcut, general, q, X, V, atol=1e-10, same_status=False)
 
@@ -211,13 +211,13 @@ def test_bounds_are_the_tighter_of_speed_and_joint_limits(scene) -> None:
     w = ctrl.weights
     rng = np.random.default_rng(9)
     for _ in range(50):
-        q = rng.uniform(scene.q_min, scene.q_max)
+        q = rng.uniform(scene.robot.q_min, scene.robot.q_max)
         lower, upper = ctrl.bounds(q)
         q_hi = ctrl.configuration_limit.upper
         q_lo = ctrl.configuration_limit.lower
         np.testing.assert_array_equal(
-            upper, np.minimum(scene.v_max * DT, w.limit_gain * (q_hi - q))
+            upper, np.minimum(scene.robot.v_max * DT, w.limit_gain * (q_hi - q))
         )
         np.testing.assert_array_equal(
-            lower, np.maximum(-scene.v_max * DT, -w.limit_gain * (q - q_lo))
+            lower, np.maximum(-scene.robot.v_max * DT, -w.limit_gain * (q - q_lo))
         )

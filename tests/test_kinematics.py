@@ -12,7 +12,7 @@ from pickplace.control.kinematics import ArmKinematics
 
 
 def _random_q(scene, rng: np.random.Generator) -> np.ndarray:
-    return rng.uniform(0.8 * scene.q_min, 0.8 * scene.q_max)
+    return rng.uniform(0.8 * scene.robot.q_min, 0.8 * scene.robot.q_max)
 
 
 def test_tool_jacobian_equals_finite_differences_of_the_tool_pose(scene) -> None:
@@ -42,10 +42,10 @@ def test_arm_model_matches_the_simulation_kinematics(scene) -> None:
     rng = np.random.default_rng(1)
     for _ in range(5):
         q = _random_q(scene, rng)
-        data.qpos[scene.arm_qpos_adr] = q
+        data.qpos[scene.robot.arm_qpos_adr] = q
         mujoco.mj_kinematics(scene.model, data)
         kin.update(q)
-        np.testing.assert_allclose(kin.p_WG(), data.site_xpos[scene.tool_site_id], atol=1e-12)
+        np.testing.assert_allclose(kin.p_WG(), data.site_xpos[scene.robot.tool_site_id], atol=1e-12)
 
 
 def test_manipulability_measures_agree_with_their_definitions(scene) -> None:
@@ -83,18 +83,20 @@ def test_holding_torques_equal_mujocos_generalized_force_of_the_weight(scene) ->
     mass = 0.2
     for _ in range(5):
         q = _random_q(scene, rng)
-        data.qpos[scene.arm_qpos_adr] = q
+        data.qpos[scene.robot.arm_qpos_adr] = q
         mujoco.mj_forward(model, data)
         qfrc = np.zeros(model.nv)
         weight = np.array([0.0, 0.0, -9.81 * mass])
-        body = model.site_bodyid[scene.tool_site_id]
+        body = model.site_bodyid[scene.robot.tool_site_id]
         mujoco.mj_applyFT(
-            model, data, weight, np.zeros(3), data.site_xpos[scene.tool_site_id], body, qfrc
+            model, data, weight, np.zeros(3), data.site_xpos[scene.robot.tool_site_id], body, qfrc
         )
         jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
-        mujoco.mj_jacSite(model, data, jacp, jacr, scene.tool_site_id)
-        J = np.vstack([jacp, jacr])[:, scene.arm_dof_adr]
-        np.testing.assert_allclose(holding_torques(J, mass), -qfrc[scene.arm_dof_adr], atol=1e-10)
+        mujoco.mj_jacSite(model, data, jacp, jacr, scene.robot.tool_site_id)
+        J = np.vstack([jacp, jacr])[:, scene.robot.arm_dof_adr]
+        np.testing.assert_allclose(
+            holding_torques(J, mass), -qfrc[scene.robot.arm_dof_adr], atol=1e-10
+        )
 
 
 def test_logged_ellipsoid_axes_diagonalise_the_translational_velocity_ellipsoid() -> None:
@@ -111,16 +113,16 @@ def test_logged_ellipsoid_axes_diagonalise_the_translational_velocity_ellipsoid(
         mujoco.mju_quat2Mat(R, log.quat_t[k])
         np.testing.assert_allclose(R.reshape(3, 3), U, atol=1e-9)
         assert np.linalg.det(U) == pytest.approx(1.0, abs=1e-9)
-        kin.update(log.q_cmd[k - 1] if k else sim.scene.q_home)
+        kin.update(log.q_cmd[k - 1] if k else sim.scene.robot.q_home)
         Jv = kin.J_WG()[:3]
         np.testing.assert_allclose(U @ np.diag(log.sigma_t[k] ** 2) @ U.T, Jv @ Jv.T, atol=1e-9)
 
 
 def test_pose_and_jacobian_are_new_arrays(scene) -> None:
     kin = ArmKinematics(scene)
-    kin.update(scene.q_home)
+    kin.update(scene.robot.q_home)
     J, x = kin.J_WG(), kin.wxyz_xyz()
-    kin.update(scene.q_home + 0.3)
+    kin.update(scene.robot.q_home + 0.3)
     J2, x2 = kin.J_WG(), kin.wxyz_xyz()
     assert not np.shares_memory(J, J2) and not np.shares_memory(x, x2)
     assert not np.allclose(J, J2) and not np.allclose(x, x2)

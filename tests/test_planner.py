@@ -58,7 +58,7 @@ def test_candidates_are_the_brick_s_grasp_symmetries_in_the_stated_order(scene: 
         np.testing.assert_allclose(X_OG.translation(), 0.0, atol=1e-15)
     # Of each pair, the first needs the smaller wrist turn from the home yaw carried along by
     # the base swing.
-    reference = swung_pose(planner.X_WG_home, X_pick.translation(), scene.p_W_base)
+    reference = swung_pose(planner.X_WG_home, X_pick.translation(), scene.robot.p_W_base)
     yaw = yaw_of(reference.rotation())
 
     def turn(X_OG: SE3) -> float:
@@ -107,7 +107,7 @@ def test_swing_via_point_equals_the_shortest_arc_under_a_half_turn(scene: Scene)
                 X_place,
                 planner.clearance_z,
                 PlanConfig(),
-                p_W_base=scene.p_W_base,
+                p_W_base=scene.robot.p_W_base,
                 via=v,
             )
             for v in ("swing", "shortest")

@@ -69,9 +69,9 @@ def test_clearance_is_mujocos_distance_between_the_named_geoms(scene: Scene) -> 
     # Rebuild the configuration at the problem's time from the pre-flight's joint path.
     m = collision_model(scene, 0.1)
     d = mujoco.MjData(m)
-    d.qpos[scene.arm_qpos_adr] = first.preflight.q[-1]
+    d.qpos[scene.robot.arm_qpos_adr] = first.preflight.q[-1]
     width = first.plan.trajectory.sample(problem.t)[2]
-    d.qpos[scene.gripper_qpos_adr] = scene.gripper_qpos_for_width(width)
+    d.qpos[scene.gripper_qpos_adr] = scene.robot.qpos_for_width(width)
     scene.set_brick_pose(d, X_pick)
     mujoco.mj_kinematics(m, d)
     g1, g2 = m.geom(robot_geom).id, m.geom(world_geom).id
@@ -116,10 +116,10 @@ def test_the_held_brick_is_checked_and_its_supports_are_not(scene: Scene) -> Non
     half = scene.source_bin.inner_half_extents
     near = _bin1(scene, float(half[0]) - 0.0375 - 0.002, 0.0, 0.0)
     X_near = brick_on_floor(scene, near, scene.source_bin.floor_top_z + 0.03)
-    clearance, pair = pf._closest(scene.q_home, 0.1, X_near, kinds, held=True)
+    clearance, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds, held=True)
     assert pair is not None and pair[:2] == ("brick", "bin1_wall_px")
     assert clearance == pytest.approx(0.002, abs=1e-6)
-    _, pair_free = pf._closest(scene.q_home, 0.1, X_near, kinds, held=False)
+    _, pair_free = pf._closest(scene.robot.q_home, 0.1, X_near, kinds, held=False)
     assert pair_free is None or pair_free[0] != "brick"
 
 
@@ -138,7 +138,7 @@ def test_a_wrist_wound_into_its_limit_is_refused(scene: Scene) -> None:
             X_place,
             planner.clearance_z,
             PlanConfig(),
-            p_W_base=scene.p_W_base,
+            p_W_base=scene.robot.p_W_base,
             X_OG=X_OG,
             via="shortest",
         )
@@ -147,7 +147,7 @@ def test_a_wrist_wound_into_its_limit_is_refused(scene: Scene) -> None:
             found.append(r.problem)
     assert any(p.kind in ("joint-limit", "ik") for p in found), found
     limited = [p for p in found if p.kind == "joint-limit"]
-    assert all(scene.arm_joint_names[-1] in p.text for p in limited)
+    assert all(scene.robot.arm_joint_names[-1] in p.text for p in limited)
 
 
 def test_config_is_validated() -> None:

@@ -248,7 +248,7 @@ def test_joint_limit_series(recording: Recording) -> None:
     ents, sc = recording.entities, recording.scene
     limits = ents["plots/joints/position_limits"].rows["Scalars:scalars"]
     assert len(limits) >= 2
-    expected = np.concatenate([sc.q_min, sc.q_max])
+    expected = np.concatenate([sc.robot.q_min, sc.robot.q_max])
     for row in limits:
         np.testing.assert_allclose(row, expected)
     # The constant lines span the whole run.

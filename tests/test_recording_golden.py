@@ -88,9 +88,11 @@ PLOTS: dict[str, Callable[[TickLog, Scene], np.ndarray]] = {
     "plots/tracking/position_error": lambda log, sc: log.position_error,
     "plots/tracking/orientation_error": lambda log, sc: log.orientation_error,
     "plots/joints/position": lambda log, sc: log.q,
-    "plots/joints/position_normalized": lambda log, sc: (log.q - sc.q_min) / (sc.q_max - sc.q_min),
+    "plots/joints/position_normalized": lambda log, sc: (
+        (log.q - sc.robot.q_min) / (sc.robot.q_max - sc.robot.q_min)
+    ),
     "plots/joints/speed": lambda log, sc: log.qdot_cmd,
-    "plots/joints/speed_ratio": lambda log, sc: np.abs(log.qdot_cmd) / sc.v_max,
+    "plots/joints/speed_ratio": lambda log, sc: np.abs(log.qdot_cmd) / sc.robot.v_max,
     "plots/gripper/width": lambda log, sc: np.column_stack([log.gripper_cmd, log.gripper_gap]),
     "plots/gripper/pad_force": lambda log, sc: log.pad_force,
     "plots/ik/tick_us": lambda log, sc: log.ik_us,
@@ -101,7 +103,7 @@ PLOTS: dict[str, Callable[[TickLog, Scene], np.ndarray]] = {
 }
 # The constant lines: one row at the first and one at the last tick.
 LIMIT_LINES: dict[str, Callable[[Scene], list[float]]] = {
-    "plots/joints/position_limits": lambda sc: [*sc.q_min, *sc.q_max],
+    "plots/joints/position_limits": lambda sc: [*sc.robot.q_min, *sc.robot.q_max],
     "plots/joints/position_normalized_limits": lambda sc: [0.0, 1.0],
     "plots/joints/speed_ratio_limit": lambda sc: [1.0],
 }

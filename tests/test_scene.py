@@ -39,22 +39,28 @@ def test_every_composed_scene_compiles_and_steps_one_second_without_warnings(rob
     assert [w.number for w in data.warning] == [0] * len(data.warning)
     assert np.all(np.isfinite(data.qpos))
     # Held by its position actuators, the arm stays at home; nothing touches the world.
-    np.testing.assert_allclose(data.qpos[scene.arm_qpos_adr], scene.q_home, atol=2e-3)
+    np.testing.assert_allclose(data.qpos[scene.robot.arm_qpos_adr], scene.robot.q_home, atol=2e-3)
     assert not data.sensordata[scene.robot_world_sensor_adr].any()
 
 
 @pytest.mark.parametrize("robot", bundled_robots())
 def test_a_scene_is_sized_by_its_robot(robot: str) -> None:
     scene = load_scene(robot=robot)
-    n = scene.n_joints
-    for array in (scene.arm_joint_ids, scene.q_min, scene.q_max, scene.v_max, scene.q_home):
+    n = scene.robot.n_joints
+    for array in (
+        scene.robot.arm_joint_ids,
+        scene.robot.q_min,
+        scene.robot.q_max,
+        scene.robot.v_max,
+        scene.robot.q_home,
+    ):
         assert array.shape == (n,)
     assert scene.arm_model.nq == scene.arm_model.nv == n
-    assert len(scene.gripper_actuator_ids) == scene.ctrl_for_width(0.05).shape[0]
-    assert scene.gripper_qpos_for_width(0.05).shape == scene.gripper_qpos_adr.shape
+    assert len(scene.robot.gripper_actuator_ids) == scene.robot.ctrl_for_width(0.05).shape[0]
+    assert scene.robot.qpos_for_width(0.05).shape == scene.gripper_qpos_adr.shape
     # The home keyframe holds the gripper open as the plans open it (at most 0.10 m).
     data = scene.make_data()
-    assert scene.gripper_gap(data) == pytest.approx(min(0.10, scene.gripper_open_width), abs=1e-4)
+    assert scene.robot.gap(data) == pytest.approx(min(0.10, scene.robot.open_width), abs=1e-4)
     # Robot bodies are the arm's and the gripper's; every other body with geoms is the world.
     robot_bodies = set(np.flatnonzero(scene.robot_body_mask).tolist())
     assert set(scene.robot.robot_body_ids.tolist()) == robot_bodies
@@ -79,27 +85,29 @@ def test_scene_options_suit_a_friction_grasp(scene) -> None:
 
 def test_arm_has_seven_limited_hinges_in_one_chain(scene) -> None:
     m = scene.model
-    assert len(scene.arm_joint_ids) == 7
-    bodies = [m.jnt_bodyid[j] for j in scene.arm_joint_ids]
+    assert len(scene.robot.arm_joint_ids) == 7
+    bodies = [m.jnt_bodyid[j] for j in scene.robot.arm_joint_ids]
     for parent, child in itertools.pairwise(bodies):
         assert m.body_parentid[child] == parent
-    for j in scene.arm_joint_ids:
+    for j in scene.robot.arm_joint_ids:
         assert m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
         assert m.jnt_limited[j]
     np.testing.assert_allclose(
-        np.rad2deg(scene.q_max), [170, 120, 170, 120, 170, 120, 175], atol=1e-3
+        np.rad2deg(scene.robot.q_max), [170, 120, 170, 120, 170, 120, 175], atol=1e-3
     )
-    np.testing.assert_allclose(np.rad2deg(scene.v_max), [85, 85, 100, 75, 130, 135, 135], atol=1e-5)
+    np.testing.assert_allclose(
+        np.rad2deg(scene.robot.v_max), [85, 85, 100, 75, 130, 135, 135], atol=1e-5
+    )
     for b in bodies:
         assert m.body_gravcomp[b] == 1.0
 
 
 def test_tool_site_lies_between_the_pads_with_z_along_the_approach(scene) -> None:
     data = scene.make_data()
-    p_tool = data.site_xpos[scene.tool_site_id]
-    p_pads = data.geom_xpos[np.concatenate(scene.pad_geom_ids)]
+    p_tool = data.site_xpos[scene.robot.tool_site_id]
+    p_pads = data.geom_xpos[np.concatenate(scene.robot.pad_geom_ids)]
     np.testing.assert_allclose(p_tool, p_pads.mean(axis=0), atol=1e-9)
-    z_tool = data.site_xmat[scene.tool_site_id].reshape(3, 3)[:, 2]
+    z_tool = data.site_xmat[scene.robot.tool_site_id].reshape(3, 3)[:, 2]
     p_flange = data.site_xpos[scene.model.site("arm/attachment_site").id]
     approach = (p_tool - p_flange) / np.linalg.norm(p_tool - p_flange)
     np.testing.assert_allclose(z_tool, approach, atol=1e-9)
@@ -123,14 +131,14 @@ def test_empty_gripper_reaches_the_commanded_gap(robot: str, gap: float) -> None
     scene = load_scene(robot=robot)
     m = scene.model
     data = scene.make_data()
-    data.ctrl[scene.gripper_actuator_ids] = scene.ctrl_for_width(gap)
+    data.ctrl[scene.robot.gripper_actuator_ids] = scene.robot.ctrl_for_width(gap)
     for _ in range(round(1.0 / m.opt.timestep)):
         mujoco.mj_step(m, data)
     expected = max(gap, scene.robot.closed_width)
-    assert abs(scene.gripper_gap(data) - expected) < 0.002
+    assert abs(scene.robot.gap(data) - expected) < 0.002
     # The logged body poses give the same gap.
-    batch = scene.gripper_gaps(data.xpos[None], data.xquat[None])
-    np.testing.assert_allclose(batch, [scene.gripper_gap(data)], atol=1e-12)
+    batch = scene.robot.gap_from_body_poses(data.xpos[None], data.xquat[None])
+    np.testing.assert_allclose(batch, [scene.robot.gap(data)], atol=1e-12)
 
 
 def test_flange_at_zero_is_straight_above_the_base_and_the_jacobian_has_rank_three(
@@ -139,14 +147,14 @@ def test_flange_at_zero_is_straight_above_the_base_and_the_jacobian_has_rank_thr
     m = scene.model
     data = mujoco.MjData(m)
     mujoco.mj_forward(m, data)  # qpos0: every arm joint at 0
-    assert np.all(data.qpos[scene.arm_qpos_adr] == 0)
+    assert np.all(data.qpos[scene.robot.arm_qpos_adr] == 0)
     flange = scene.model.site("arm/attachment_site").id
     p_flange = data.site_xpos[flange]
     p_base = data.xpos[m.body("arm/base").id]
     np.testing.assert_allclose(p_flange - p_base, [0, 0, FLANGE_HEIGHT_AT_ZERO], atol=1e-3)
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
     mujoco.mj_jacSite(m, data, jacp, jacr, flange)
-    J = np.vstack([jacp, jacr])[:, scene.arm_dof_adr]
+    J = np.vstack([jacp, jacr])[:, scene.robot.arm_dof_adr]
     sigma = np.linalg.svd(J, compute_uv=False)
     assert np.all(sigma[:3] > 0.1)
     assert np.all(sigma[3:] < 1e-9)
@@ -156,18 +164,18 @@ def test_home_posture_is_bent_and_well_conditioned(scene) -> None:
     m = scene.model
     data = scene.make_data()
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
-    mujoco.mj_jacSite(m, data, jacp, jacr, scene.tool_site_id)
-    sigma = np.linalg.svd(np.vstack([jacp, jacr])[:, scene.arm_dof_adr], compute_uv=False)
+    mujoco.mj_jacSite(m, data, jacp, jacr, scene.robot.tool_site_id)
+    sigma = np.linalg.svd(np.vstack([jacp, jacr])[:, scene.robot.arm_dof_adr], compute_uv=False)
     assert sigma[-1] > 0.1
-    assert abs(scene.q_home[3]) > 0.5  # elbow bent
+    assert abs(scene.robot.q_home[3]) > 0.5  # elbow bent
 
 
 def test_bins_are_reachable_open_boxes_on_two_sides(scene) -> None:
     for b in (scene.source_bin, scene.target_bin):
         assert b.wall_top_z > b.floor_top_z
         assert np.all(b.inner_half_extents > 0.1)
-    a = scene.source_bin.center_W[:2] - scene.p_W_base[:2]
-    c = scene.target_bin.center_W[:2] - scene.p_W_base[:2]
+    a = scene.source_bin.center_W[:2] - scene.robot.p_W_base[:2]
+    c = scene.target_bin.center_W[:2] - scene.robot.p_W_base[:2]
     swing = np.degrees(np.arccos(a @ c / np.linalg.norm(a) / np.linalg.norm(c)))
     assert swing >= 60.0
 

@@ -55,7 +55,7 @@ def _contact_forces(sim: Simulation) -> np.ndarray:
     f6 = np.zeros(6)
     for i in range(d.ncon):
         pair = {int(d.contact.geom1[i]), int(d.contact.geom2[i])}
-        for side, pads in enumerate(sim.scene.pad_geom_ids):
+        for side, pads in enumerate(sim.scene.robot.pad_geom_ids):
             for pad in pads.tolist():
                 if pair == {pad, sim.scene.brick_geom_id}:
                     mujoco.mj_contactForce(m, d, i, f6)
@@ -81,8 +81,8 @@ def test_pad_sensors_equal_the_contact_forces_and_the_log_keeps_them() -> None:
         seen.append(expected.min())
     # The squeeze measured in calibration (the WSG-like gripper's 40 N force limit) is what
     # squeezes once the pads touch.
-    assert max(seen) == pytest.approx(sim.scene.squeeze_force, rel=0.05)
-    assert sim.scene.squeeze_force == pytest.approx(40.0, rel=1e-3)
+    assert max(seen) == pytest.approx(sim.scene.robot.squeeze_force, rel=0.05)
+    assert sim.scene.robot.squeeze_force == pytest.approx(40.0, rel=1e-3)
 
 
 def test_too_few_sensor_slots_are_reported() -> None:
@@ -90,7 +90,7 @@ def test_too_few_sensor_slots_are_reported() -> None:
     scene = load_scene(pad_slots=2)
     task = get_scenario("pick-place").build(BuildRequest(scene, "pick-place", 0))
     sim = Simulation(scene, task, make_controller("qp", scene, 0.01))
-    assert sim.scene.pad_force_slots == 2
+    assert sim.scene.robot.pad_force_slots == 2
     sim.advance(_grasp_tick(sim) + 20)
     warnings = [e for e in sim.events if e.kind == "sensor"]
     assert len(warnings) == 1

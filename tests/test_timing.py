@@ -192,7 +192,7 @@ def test_the_cycle_time_bound_is_a_lower_bound_of_the_run() -> None:
     _, task, sim = prepare(RunRequest())
     s = sim.run().summary()
     assert s["success"]
-    args = (task.trajectory.keyframes, sim.dt, sim.log.q_cmd, sim.scene.v_max)
+    args = (task.trajectory.keyframes, sim.dt, sim.log.q_cmd, sim.scene.robot.v_max)
     bound, at_speed_limits = cycle_time_bound(*args), cycle_time_at_speed_limits(*args)
     assert 0 < bound <= at_speed_limits <= s["cycle_time_s"]
     assert s["cycle_time_s"] == pytest.approx(task.trajectory.end_time)

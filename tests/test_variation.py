@@ -83,7 +83,7 @@ def test_a_bigger_brick_starts_resting_on_the_floor() -> None:
 
 def test_friction_is_the_pads_the_brick_keeps_its_own(scene: Scene) -> None:
     varied = apply_to_scene(scene, draw(friction=0.4))
-    for pad in np.concatenate(scene.pad_geom_ids).tolist():
+    for pad in np.concatenate(scene.robot.pad_geom_ids).tolist():
         assert varied.model.geom_friction[pad, 0] == 0.4
         assert varied.model.geom_priority[pad] > varied.model.geom_priority[scene.brick_geom_id]
     g = scene.brick_geom_id
@@ -95,9 +95,9 @@ def test_grip_force_sets_the_limit_and_keeps_the_grip_saturated(
     scene: Scene, force: float, gain: float
 ) -> None:
     varied = apply_to_scene(scene, draw(grip_force=force))
-    assert varied.squeeze_force == force
-    ratio = force / scene.squeeze_force
-    for a in scene.gripper_actuator_ids.tolist():
+    assert varied.robot.squeeze_force == force
+    ratio = force / scene.robot.squeeze_force
+    for a in scene.robot.gripper_actuator_ids.tolist():
         np.testing.assert_allclose(
             varied.model.actuator_forcerange[a], ratio * scene.model.actuator_forcerange[a]
         )

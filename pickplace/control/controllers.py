@@ -117,7 +117,7 @@ class DiffIKController(ABC):
         self.scene = scene
         self.gains = gains or ResolvedRateGains()
         self.kinematics = kinematics or ArmKinematics(scene)
-        self.v_max = scene.v_max.copy()
+        self.v_max = scene.robot.v_max.copy()
         self._K = np.repeat([self.gains.position, self.gains.orientation], 3)  # diag of K
         self._k_p = float(self.gains.position)
         self._k_R = float(self.gains.orientation)
@@ -302,13 +302,13 @@ class QPController(DiffIKController):
             gain=1.0,
         )
         self.posture_task = mink.PostureTask(model, cost=w.posture_cost, gain=w.posture_gain)
-        self.posture_task.set_target(scene.q_home)
+        self.posture_task.set_target(scene.robot.q_home)
         self.tasks: list[mink.Task] = [self.frame_task, self.posture_task]
         self.configuration_limit = mink.ConfigurationLimit(
             model, gain=w.limit_gain, min_distance_from_limits=w.limit_margin
         )
         self.velocity_limit = mink.VelocityLimit(
-            model, dict(zip(scene.arm_joint_names, self.v_max.tolist(), strict=True))
+            model, dict(zip(scene.robot.arm_joint_names, self.v_max.tolist(), strict=True))
         )
         self.limits: list[mink.Limit] = [self.configuration_limit, self.velocity_limit]
         # The frame task's target: one SE3 whose parameter vector is rewritten every tick.
@@ -349,7 +349,7 @@ class QPController(DiffIKController):
         self._lower = np.empty(nv)
         self._upper = np.empty(nv)
         self._bound_floats: tuple[list[float], list[float]] = ([], [])
-        self._bounds_into(scene.q_home)
+        self._bounds_into(scene.robot.q_home)
         self._solve_qp: Callable[[np.ndarray], np.ndarray | None] = (
             self._solve_fast if backend == "fast" else self._solve_mink
         )

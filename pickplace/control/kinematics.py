@@ -28,9 +28,9 @@ class ArmKinematics:
 
     def __init__(self, scene: Scene, model: mujoco.MjModel | None = None) -> None:
         self.model = model if model is not None else scene.arm_model
-        self.configuration = mink.Configuration(self.model, q=scene.q_home.copy())
+        self.configuration = mink.Configuration(self.model, q=scene.robot.q_home.copy())
         self.data = self.configuration.data
-        self.tool_site = scene.tool_site_name
+        self.tool_site = scene.robot.tool_site_name
         self.tool_site_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, self.tool_site)
         self.nv = int(self.model.nv)
         # Live views into MjData (its buffers never move): no attribute look-ups per tick.

@@ -179,12 +179,12 @@ class PickPlacePlanner:
             min_segment_duration=2 * dt,
             time_quantum=dt,
         )
-        pads = np.concatenate(scene.pad_geom_ids)
+        pads = np.concatenate(scene.robot.pad_geom_ids)
         mu = float(scene.model.geom_friction[pads, 0].min())  # the pads have contact priority
         # |a − g| the pads' friction holds on the brick: μ · 2 sides · squeeze force / mass.
-        self.slip_accel = mu * 2.0 * scene.squeeze_force / scene.brick_mass
+        self.slip_accel = mu * 2.0 * scene.robot.squeeze_force / scene.brick_mass
         kin = ArmKinematics(scene)
-        kin.update(scene.q_home)
+        kin.update(scene.robot.q_home)
         self.X_WG_home = kin.X_WG()
         src, dst = scene.source_bin, scene.target_bin
         self.clearance_z = max(src.wall_top_z, dst.wall_top_z) + CLEARANCE_ABOVE_WALLS
@@ -239,7 +239,9 @@ class PickPlacePlanner:
 
         def timed_within(timing: TimingConfig, slip: float | None) -> Plan:
             def limits(carried: bool) -> SegmentLimits:
-                return timing.limits(self.scene.v_max, self.scene.a_max, slip if carried else None)
+                return timing.limits(
+                    self.scene.robot.v_max, self.scene.robot.a_max, slip if carried else None
+                )
 
             return retime(path, times, q, limits)
 
@@ -270,13 +272,13 @@ class PickPlacePlanner:
             X_WO_place,
             self.clearance_z,
             config or self.config,
-            p_W_base=self.scene.p_W_base,
+            p_W_base=self.scene.robot.p_W_base,
             X_OG=X_OG,
         )
 
     def grasps(self, X_WO_pick: SE3) -> Iterator[tuple[str, SE3]]:
         """The candidate grasps X_OG in the planner's order, labelled by their turn."""
-        reference = swung_pose(self.X_WG_home, X_WO_pick.translation(), self.scene.p_W_base)
+        reference = swung_pose(self.X_WG_home, X_WO_pick.translation(), self.scene.robot.p_W_base)
         yaw = yaw_of(reference.rotation())
 
         def yaw_change(X_OG: SE3) -> float:

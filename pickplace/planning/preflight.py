@@ -180,13 +180,13 @@ class Preflight:
         self.controller = make_controller(controller, scene, self.dt)
         self.model = collision_model(scene, self.config.detection_distance)
         self.data = mujoco.MjData(self.model)
-        self._names = scene.arm_joint_names
+        self._names = scene.robot.arm_joint_names
         ng = self.model.ngeom
         self._world = np.array([scene.is_world_geom(g) for g in range(ng)])
         self._robot = np.array([scene.is_robot_geom(g) for g in range(ng)])
         self._gripper_qpos_adr = scene.gripper_qpos_adr
         self._width = math.nan  # the last width loaded, and its gripper joint positions
-        self._gripper_qpos = scene.gripper_qpos_for_width(0.0)
+        self._gripper_qpos = scene.robot.qpos_for_width(0.0)
 
     def run(
         self, plan: Plan, X_WO_start: SE3, X_WO_goal: SE3 | None, stop_at_problem: bool = True
@@ -213,12 +213,12 @@ class Preflight:
         command, sample = self.controller.command, traj.sample
         n = math.floor(traj.end_time / dt + 1e-9) + 1
         times = np.arange(n) * dt
-        nq = len(sc.q_home)
+        nq = len(sc.robot.q_home)
         q_path, qdot_path, J_path = np.zeros((n, nq)), np.zeros((n, nq)), np.zeros((n, 6, nq))
         clear_path = np.full(n, cfg.detection_distance)
         tracking_sq = cfg.tracking_tolerance**2
         midpoint = cfg.midpoint_feedforward
-        q = sc.q_home.copy()
+        q = sc.robot.q_home.copy()
         found: Problem | None = None  # the first IK or collision problem
         end = n
         half_dt = 0.5 * dt
@@ -249,8 +249,8 @@ class Preflight:
         if problem is not None and stop_at_problem:
             end = min(end, round(problem.t / dt) + 1)
         q_all = q_path[:end]
-        margin = np.minimum(q_all - sc.q_min, sc.q_max - q_all)
-        ratio = np.abs(qdot_path[:end]) / sc.v_max
+        margin = np.minimum(q_all - sc.robot.q_min, sc.robot.q_max - q_all)
+        ratio = np.abs(qdot_path[:end]) / sc.robot.v_max
         sigma = np.linalg.svd(J_path[:end], compute_uv=False)[:, -1]
         return PreflightResult(
             problem=problem,
@@ -285,7 +285,7 @@ class Preflight:
                 f"(limit {cfg.tracking_tolerance * 1000:.0f} mm; status {res.status.value}): "
                 "unreachable or too fast"
             )
-            if self.scene.a_max is None:
+            if self.scene.robot.a_max is None:
                 text += (
                     " (the robot's description gives no accel_limits, so motions start at full "
                     "speed: give them, or lower --speed)"
@@ -312,28 +312,30 @@ class Preflight:
         cfg, sc = self.config, self.scene
         q, qdot = q[:end], qdot[:end]
         out: list[Problem] = []
-        below, above = q - sc.q_min, sc.q_max - q
+        below, above = q - sc.robot.q_min, sc.robot.q_max - q
         margin = np.minimum(below, above)
         bad = np.flatnonzero(margin.min(axis=1) < cfg.joint_margin)
         if bad.size:
             k = int(bad[0])
             j = int(np.argmin(margin[k]))
             side, limit = (
-                ("lower", sc.q_min[j]) if below[k, j] < above[k, j] else ("upper", sc.q_max[j])
+                ("lower", sc.robot.q_min[j])
+                if below[k, j] < above[k, j]
+                else ("upper", sc.robot.q_max[j])
             )
             text = (
                 f"{self._names[j]} at {q[k, j]:.3f} rad is {margin[k, j]:.3f} rad from its "
                 f"{side} limit {limit:.3f} rad (margin {cfg.joint_margin} rad)"
             )
             out.append(Problem(float(times[k]), "joint-limit", text, self._anchor_at(q[k], j)))
-        ratio = np.abs(qdot) / sc.v_max
+        ratio = np.abs(qdot) / sc.robot.v_max
         bad = np.flatnonzero(ratio.max(axis=1) > 1.0 + cfg.speed_ratio_tolerance)
         if bad.size:
             k = int(bad[0])
             j = int(np.argmax(ratio[k]))
             text = (
                 f"{self._names[j]} commanded at {abs(qdot[k, j]):.2f} rad/s, "
-                f"{ratio[k, j]:.2f}x its limit {sc.v_max[j]:.2f} rad/s"
+                f"{ratio[k, j]:.2f}x its limit {sc.robot.v_max[j]:.2f} rad/s"
             )
             out.append(Problem(float(times[k]), "speed-limit", text, self._anchor_at(q[k], j)))
         sigma = np.linalg.svd(J[:end], compute_uv=False)[:, -1]
@@ -353,26 +355,26 @@ class Preflight:
     def _anchor_at(self, q: np.ndarray, j: int) -> tuple[float, float, float]:
         """World position of arm joint ``j``'s anchor with the arm at ``q``."""
         self._load_arm(q)
-        p = self.data.xanchor[self.scene.arm_joint_ids[j]]
+        p = self.data.xanchor[self.scene.robot.arm_joint_ids[j]]
         return (float(p[0]), float(p[1]), float(p[2]))
 
     def _load_arm(self, q: np.ndarray) -> None:
         """Arm at ``q``: kinematics only."""
-        self.data.qpos[self.scene.arm_qpos_adr] = q
+        self.data.qpos[self.scene.robot.arm_qpos_adr] = q
         mujoco.mj_kinematics(self.model, self.data)
 
     def _tool_point(self) -> tuple[float, float, float]:
-        p = self.data.site_xpos[self.scene.tool_site_id]
+        p = self.data.site_xpos[self.scene.robot.tool_site_id]
         return (float(p[0]), float(p[1]), float(p[2]))
 
     def _load(self, q: np.ndarray, width: float, X_WO: SE3) -> None:
         """Arm at ``q``, the free fingers at gap ``width`` (the calibrated joint positions of
         every gripper joint), brick at ``X_WO``; kinematics and contacts."""
         m, d, sc = self.model, self.data, self.scene
-        d.qpos[sc.arm_qpos_adr] = q
+        d.qpos[sc.robot.arm_qpos_adr] = q
         if width != self._width:  # widths stay the same for most of a plan
             self._width = width
-            self._gripper_qpos = sc.gripper_qpos_for_width(width)
+            self._gripper_qpos = sc.robot.qpos_for_width(width)
         d.qpos[self._gripper_qpos_adr] = self._gripper_qpos
         sc.set_brick_pose(d, X_WO)
         mujoco.mj_kinematics(m, d)
@@ -390,7 +392,7 @@ class Preflight:
         kinds[brick, world] = 2
         kinds[world, brick] = 2
         for X_WO in (X_WO_start, X_WO_end):
-            self._load(sc.q_home, 0.0, X_WO)
+            self._load(sc.robot.q_home, 0.0, X_WO)
             d, n = self.data, self.data.ncon
             g1, g2 = d.contact.geom1[:n], d.contact.geom2[:n]
             near = d.contact.dist[:n] <= _SUPPORT_DISTANCE

@@ -281,15 +281,15 @@ def one_color(color: Color) -> Callable[[int], list[Color]]:
 
 
 def _singular_value_names(sc: Scene) -> list[str]:
-    return [f"σ{i}" for i in range(1, min(6, sc.n_joints) + 1)]
+    return [f"σ{i}" for i in range(1, min(6, sc.robot.n_joints) + 1)]
 
 
 def _joint_names(sc: Scene) -> list[str]:
-    return list(sc.arm_joint_names)
+    return list(sc.robot.arm_joint_names)
 
 
 def _joint_limit_names(sc: Scene) -> list[str]:
-    joints = sc.arm_joint_names
+    joints = sc.robot.arm_joint_names
     return [f"{j} lower" for j in joints] + [f"{j} upper" for j in joints]
 
 
@@ -434,7 +434,9 @@ PLOTS: tuple[Plot, ...] = (
         tab="Joints",
         title="Joint position (normalised)",
         names=_joint_names,
-        values=lambda log, sl: (log.q[sl] - log.scene.q_min) / (log.scene.q_max - log.scene.q_min),
+        values=lambda log, sl: (
+            (log.q[sl] - log.scene.robot.q_min) / (log.scene.robot.q_max - log.scene.robot.q_min)
+        ),
         legend=False,
         limits=LimitLines(
             path="plots/joints/position_normalized_limits",
@@ -450,7 +452,7 @@ PLOTS: tuple[Plot, ...] = (
         tab="Joints",
         title="Joint speed / limit",
         names=_joint_names,
-        values=lambda log, sl: np.abs(log.qdot_cmd[sl]) / log.scene.v_max,
+        values=lambda log, sl: np.abs(log.qdot_cmd[sl]) / log.scene.robot.v_max,
         legend=False,
         limits=LimitLines(
             path="plots/joints/speed_ratio_limit",
@@ -471,7 +473,7 @@ PLOTS: tuple[Plot, ...] = (
         limits=LimitLines(
             path="plots/joints/position_limits",
             names=_joint_limit_names,
-            values=lambda sc: np.concatenate([sc.q_min, sc.q_max]),
+            values=lambda sc: np.concatenate([sc.robot.q_min, sc.robot.q_max]),
             colors=lambda n: palette(n // 2, alpha=0.45) * 2,
             width=1.0,
         ),

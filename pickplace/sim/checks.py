@@ -208,8 +208,8 @@ class SpeedLimitCheck(Check):
 
     def __init__(self, ctx: CheckContext) -> None:
         self.dt = ctx.dt
-        self.v_max = ctx.scene.v_max
-        self.names = ctx.scene.arm_joint_names
+        self.v_max = ctx.scene.robot.v_max
+        self.names = ctx.scene.robot.arm_joint_names
         self.threshold = 1.0 + ctx.criteria.speed_ratio_tolerance
 
     def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
@@ -295,7 +295,7 @@ class GraspMonitor(Check):
         self.p_GO_grasp: np.ndarray | None = None
         self.contact_lost_since: float | None = None
         self.brick_width = grasp_width(ctx.plan, ctx.scene)
-        self.firm_force = ctx.criteria.grasp_force_fraction * ctx.scene.squeeze_force
+        self.firm_force = ctx.criteria.grasp_force_fraction * ctx.scene.robot.squeeze_force
 
     def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
         holding = np.zeros(k1 - k0, dtype=bool)

@@ -25,7 +25,7 @@ class GripperDisabled:
     name = "gripper-disabled"
 
     def __init__(self, scene: Scene) -> None:
-        self.actuators = scene.gripper_actuator_ids.copy()
+        self.actuators = scene.robot.gripper_actuator_ids.copy()
 
     def apply(self, world: World, tick: int) -> str | None:
         if tick != 0:

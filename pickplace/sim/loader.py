@@ -109,7 +109,7 @@ def _compose(
 
 def _set_home(scene: Scene, q_home: np.ndarray, width: float) -> None:
     """Write the home posture and the gripper at ``width`` [m] into the ``home`` keyframe."""
-    m, r, key = scene.model, scene.robot, scene.home_key_id
+    m, r, key = scene.model, scene.robot, scene.robot.home_key_id
     m.key_qpos[key, r.arm_qpos_adr] = q_home
     m.key_qpos[key, scene.gripper_qpos_adr] = r.qpos_for_width(width)
     m.key_ctrl[key, r.arm_actuator_ids] = q_home

@@ -163,8 +163,8 @@ class Simulation:
             )
         scene.set_brick_pose(self.data, task.X_WO_start)
         mujoco.mj_forward(self.model, self.data)
-        self.q_cmd = self.data.qpos[scene.arm_qpos_adr].copy()
-        act = scene.arm_actuator_ids
+        self.q_cmd = self.data.qpos[scene.robot.arm_qpos_adr].copy()
+        act = scene.robot.arm_actuator_ids
         kp = self.model.actuator_gainprm[act, 0]
         kv = -self.model.actuator_biasprm[act, 2]
         self._ff = kv / kp if self.config.velocity_feedforward else np.zeros(len(act))
@@ -172,9 +172,9 @@ class Simulation:
         self._use_dynamics = self.config.dynamics_feedforward
         self._zero_qdot = np.zeros(len(act))
         # The robot's actuators, arm then gripper: one row of the log's ctrl per tick.
-        self._robot_ctrl = _as_slice(np.concatenate([act, scene.gripper_actuator_ids]))
-        self._ctrl_for_widths = scene.ctrl_for_widths
-        self._site = scene.tool_site_id
+        self._robot_ctrl = _as_slice(np.concatenate([act, scene.robot.gripper_actuator_ids]))
+        self._ctrl_for_widths = scene.robot.ctrl_for_widths
+        self._site = scene.robot.tool_site_id
         self._views = _DataViews(self.data)
         autoreset_off = self.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_AUTORESET
         self._check_qacc = bool(autoreset_off)
@@ -206,7 +206,7 @@ class Simulation:
 
     def pad_forces(self) -> np.ndarray:
         """Normal force [N] of the brick on the left and right pads (from the pad sensors)."""
-        return self.scene.pad_normal_forces(self.data.sensordata)
+        return self.scene.robot.pad_normal_forces(self.data.sensordata)
 
     # ------------------------------------------------------------------ events
 
@@ -468,7 +468,7 @@ class Simulation:
         if overflow is not None and not self._slots_warned:
             self._slots_warned = True
             tick, found = overflow
-            slots = self.scene.pad_force_slots
+            slots = self.scene.robot.pad_force_slots
             self.emit(
                 "sensor",
                 f"a pad touched the brick in {found} points but its sensor reports {slots}: "

@@ -131,15 +131,15 @@ def arm_reach(scene: Scene) -> ArmReach:
         PlanError: The arm has no three such joints (it cannot be stretched by a pitch chain).
     """
     kin = ArmKinematics(scene)
-    kin.update(np.zeros(scene.n_joints))
+    kin.update(np.zeros(scene.robot.n_joints))
     axes, anchors = kin.data.xaxis, kin.data.xanchor  # the arm model's joints are the arm's
     base = axes[0]
-    pitch = [j for j in range(1, scene.n_joints) if abs(axes[j] @ base) < _AXIS_TOLERANCE]
+    pitch = [j for j in range(1, scene.robot.n_joints) if abs(axes[j] @ base) < _AXIS_TOLERANCE]
     chain = [j for j in pitch if abs(axes[j] @ axes[pitch[0]]) > 1.0 - _AXIS_TOLERANCE]
     if len(chain) < 3:
         raise PlanError(
             f"the arm has {len(chain)} parallel joints across its base axis ("
-            f"{', '.join(scene.arm_joint_names[j] for j in chain) or 'none'}); valid for "
+            f"{', '.join(scene.robot.arm_joint_names[j] for j in chain) or 'none'}); valid for "
             f"singular-reach: an arm with shoulder, elbow and wrist joints"
         )
     s, e, w = chain[:3]
@@ -162,10 +162,10 @@ def full_stretch_distance(scene: Scene, z_tool: float) -> float:
     """
     reach = arm_reach(scene)
     kin = ArmKinematics(scene)
-    kin.update(scene.q_home)
+    kin.update(scene.robot.q_home)
     d = kin.data
     a = d.xaxis[reach.shoulder].copy()  # the pitch axis at home (horizontal)
-    p_base, p_shoulder = scene.p_W_base, d.xanchor[reach.shoulder]
+    p_base, p_shoulder = scene.robot.p_W_base, d.xanchor[reach.shoulder]
     p_wrist, p_tool = d.xanchor[reach.wrist], kin.p_WG()
     u = np.cross(a, [0.0, 0.0, 1.0])  # horizontal, across the pitch axis: the arm's radial axis
     u /= np.linalg.norm(u)
@@ -196,13 +196,13 @@ def singular_reach_task(req: BuildRequest, plan: PlanConfig | None = None) -> Ta
     scene = req.scene
     plan = for_gripper(plan or PlanConfig(), scene.robot.calibration)
     kin = ArmKinematics(scene)
-    kin.update(scene.q_home)
+    kin.update(scene.robot.q_home)
     X_home = kin.X_WG()
     z_tool = 0.30
     r_far = full_stretch_distance(scene, z_tool) + REACH_OVERSHOOT
     # Keep the tool's yaw relative to the base as at home, so the last joint does not wind up
     # while the base swings from the home direction to the line's direction (+y).
-    base = scene.p_W_base
+    base = scene.robot.p_W_base
     p_home = X_home.translation() - base
     swing = math.pi / 2 - math.atan2(p_home[1], p_home[0])
     R = top_down_rotation(yaw_of(X_home.rotation()) + swing)

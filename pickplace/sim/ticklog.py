@@ -36,8 +36,8 @@ class TickLog:
 
     def __init__(self, scene: Scene, capacity: int, dt: float) -> None:
         n, model = capacity, scene.model
-        nq = scene.n_joints  # arm joints
-        n_grip = len(scene.gripper_actuator_ids)
+        nq = scene.robot.n_joints  # arm joints
+        n_grip = len(scene.robot.gripper_actuator_ids)
         self.scene = scene
         self.dt = dt
         # ---- raw, written by the loop every tick
@@ -94,7 +94,7 @@ class TickLog:
         # ---- filled by the grasp checks
         self.holding_torque = np.zeros((n, nq))
         self.slip = np.full(n, np.nan)
-        self._inv_v_max = 1.0 / scene.v_max  # for derive()
+        self._inv_v_max = 1.0 / scene.robot.v_max  # for derive()
         self._world_sensor_cols = scene.robot_world_sensor_adr[:, None] + np.arange(4)
         sides = scene.pad_sensor_side
         self._pad_sides = np.zeros((len(sides), 2))  # per pad sensor: 1 in its side's column
@@ -113,8 +113,11 @@ class TickLog:
         sl = slice(k0, k1)
         qpos = self.qpos[sl]
         self.t[sl] = np.arange(k0, k1) * self.dt + self.dt
-        self.q[sl] = qpos[:, sc.arm_qpos_adr]
-        self.gripper_gap[sl] = sc.gripper_gaps(self.body_pos[sl], self.body_quat[sl], self.R_WG[sl])
+        self.q[sl] = qpos[:, sc.robot.arm_qpos_adr]
+        y_W = self.R_WG[sl][..., :, 1]  # the tool's closing axis, from its logged rotation
+        self.gripper_gap[sl] = sc.robot.gap_from_body_poses(
+            self.body_pos[sl], self.body_quat[sl], y_W
+        )
         pads = sc.pad_sensor_rows(self.sensordata[sl])  # (ticks, sensors, slots, 4)
         self.pad_force[sl] = pads[..., 1].sum(axis=-1) @ self._pad_sides
         found = pads[:, :, 0, 0].max(axis=1)  # contacts counted, slot 0 of each pad sensor
@@ -149,13 +152,13 @@ class TickLog:
         self.limit_violation[sl] = np.maximum.reduce(
             [
                 np.zeros(k1 - k0),
-                (q - sc.q_max).max(axis=1),
-                (sc.q_min - q).max(axis=1),
-                (q_cmd - sc.q_max).max(axis=1),
-                (sc.q_min - q_cmd).max(axis=1),
+                (q - sc.robot.q_max).max(axis=1),
+                (sc.robot.q_min - q).max(axis=1),
+                (q_cmd - sc.robot.q_max).max(axis=1),
+                (sc.robot.q_min - q_cmd).max(axis=1),
             ]
         )
-        over = np.flatnonzero(found > sc.pad_force_slots)
+        over = np.flatnonzero(found > sc.robot.pad_force_slots)
         return (k0 + int(over[0]), int(found[over[0]])) if over.size else None
 
     def set_holding(self, k0: int, k1: int, holding: np.ndarray, mass: float) -> None:

@@ -63,7 +63,7 @@ def apply_to_scene(scene: Scene, draw: ParameterDraw) -> Scene:
     body, geom = scene.brick_body_id, scene.brick_geom_id
     half = scene.brick_half_extents.copy()
     mass = float(model.body_mass[body])
-    squeeze = scene.squeeze_force
+    squeeze = scene.robot.squeeze_force
 
     size = draw.get("brick_size")
     if size is not None:
@@ -79,13 +79,13 @@ def apply_to_scene(scene: Scene, draw: ParameterDraw) -> Scene:
         mass = new_mass
     mu = draw.get("friction")
     if mu is not None:
-        for pad in np.concatenate(scene.pad_geom_ids).tolist():
+        for pad in np.concatenate(scene.robot.pad_geom_ids).tolist():
             model.geom_friction[pad, 0] = mu
     force = draw.get("grip_force")
     if force is not None:
         ratio = force / squeeze
         gain = max(1.0, ratio)
-        for a in scene.gripper_actuator_ids.tolist():
+        for a in scene.robot.gripper_actuator_ids.tolist():
             model.actuator_forcerange[a] *= ratio
             model.actuator_gainprm[a, 0] *= gain
             model.actuator_biasprm[a, 1] *= gain

@@ -86,7 +86,7 @@ def placement_problems(
         problems.append("still moving")
     if brick_touches_robot(scene, data):
         problems.append("still touching the gripper")
-    gap = scene.gripper_gap(data)
+    gap = scene.robot.gap(data)
     if gap < grasp_width:
         problems.append(f"gripper not open (gap {gap * 1000:.0f} mm)")
     return problems

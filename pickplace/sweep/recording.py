@@ -696,7 +696,7 @@ def log_sweep(
     )
     colors = outcome_colors([outcome_of(t) for t in trials])
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    _log_bin(rec, scene.source_bin, scene.p_W_base)
+    _log_bin(rec, scene.source_bin, scene.robot.p_W_base)
     arms = _arms_of(trials)
     legend: list[tuple[str, tuple[float, float, float]]] = []
     for arm in arms or [""]:

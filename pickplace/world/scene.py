@@ -259,143 +259,6 @@ class Scene:
     world_contact_body_ids: np.ndarray
     robot_world_sensor_adr: np.ndarray
 
-    # ------------------------------------------------------------------ the arm
-
-    @property
-    def n_joints(self) -> int:
-        """Number of arm joints."""
-        return self.robot.n_joints
-
-    @property
-    def arm_joint_names(self) -> tuple[str, ...]:
-        """Names of the arm joints in the scene, base to flange."""
-        return self.robot.arm_joint_names
-
-    @property
-    def arm_joint_ids(self) -> np.ndarray:
-        """Joint ids of the arm joints, base to flange."""
-        return self.robot.arm_joint_ids
-
-    @property
-    def arm_qpos_adr(self) -> np.ndarray:
-        """qpos addresses of the arm joints."""
-        return self.robot.arm_qpos_adr
-
-    @property
-    def arm_dof_adr(self) -> np.ndarray:
-        """dof (qvel) addresses of the arm joints."""
-        return self.robot.arm_dof_adr
-
-    @property
-    def q_min(self) -> np.ndarray:
-        """Lower joint limits [rad or m]; -inf for continuous joints."""
-        return self.robot.q_min
-
-    @property
-    def q_max(self) -> np.ndarray:
-        """Upper joint limits [rad or m]; +inf for continuous joints."""
-        return self.robot.q_max
-
-    @property
-    def v_max(self) -> np.ndarray:
-        """Joint speed limits [rad/s or m/s], from the robot description."""
-        return self.robot.v_max
-
-    @property
-    def a_max(self) -> np.ndarray | None:
-        """Joint acceleration limits [rad/s²], from the robot description, or None."""
-        return self.robot.a_max
-
-    @property
-    def arm_actuator_ids(self) -> np.ndarray:
-        """Position actuator of each arm joint."""
-        return self.robot.arm_actuator_ids
-
-    @property
-    def q_home(self) -> np.ndarray:
-        """Home posture of the arm (the ``home`` keyframe's) [rad]."""
-        return self.robot.q_home
-
-    @property
-    def home_key_id(self) -> int:
-        """Keyframe with the home posture, the gripper open."""
-        return self.robot.home_key_id
-
-    @property
-    def p_W_base(self) -> np.ndarray:
-        """Anchor of the first arm joint (the base axis) in world [m]."""
-        return self.robot.p_W_base
-
-    @property
-    def tool_site_id(self) -> int:
-        """Calibrated tool site: z along the approach, y along the closing axis."""
-        return self.robot.tool_site_id
-
-    @property
-    def tool_site_name(self) -> str:
-        """Name of the tool site."""
-        return self.robot.tool_site_name
-
-    # ------------------------------------------------------------------ the gripper
-
-    @property
-    def gripper_actuator_ids(self) -> np.ndarray:
-        """The gripper's actuators (order of :meth:`ctrl_for_width`)."""
-        return self.robot.gripper_actuator_ids
-
-    @property
-    def gripper_joint_ids(self) -> np.ndarray:
-        """The gripper's joints (order of :meth:`gripper_qpos_for_width`)."""
-        return self.robot.gripper_joint_ids
-
-    @property
-    def gripper_open_width(self) -> float:
-        """Pad gap at the open command [m] (calibrated)."""
-        return self.robot.open_width
-
-    @property
-    def squeeze_force(self) -> float:
-        """Squeeze per jaw [N] a grasp is judged against: measured in calibration, or the
-        description's ``grip_force``."""
-        return self.robot.squeeze_force
-
-    @property
-    def pad_geom_ids(self) -> tuple[np.ndarray, np.ndarray]:
-        """Pad geoms of the +y ("left") and the -y ("right") side of the tool frame."""
-        return self.robot.pad_geom_ids
-
-    @property
-    def pad_force_slots(self) -> int:
-        """Contacts each pad sensor reports."""
-        return self.robot.pad_force_slots
-
-    def ctrl_for_width(self, width: float) -> np.ndarray:
-        """Gripper command (one value per gripper actuator) for a pad gap of ``width`` [m];
-        at or below the closed width the closed command (full squeeze on an object)."""
-        return self.robot.ctrl_for_width(width)
-
-    def ctrl_for_widths(self, widths: np.ndarray) -> np.ndarray:
-        """:meth:`ctrl_for_width` of each of ``widths`` (k,), shape (k, gripper actuators)."""
-        return self.robot.ctrl_for_widths(widths)
-
-    def gripper_qpos_for_width(self, width: float) -> np.ndarray:
-        """Gripper joint positions of the free fingers at gap ``width`` [m], for
-        :attr:`gripper_qpos_adr` (what a kinematic copy of the scene sets)."""
-        return self.robot.qpos_for_width(width)
-
-    def gripper_gap(self, data: mujoco.MjData) -> float:
-        """Gap between the innermost pad faces along the tool's y axis [m], now."""
-        return self.robot.gap(data)
-
-    def gripper_gaps(
-        self, body_pos: np.ndarray, body_quat: np.ndarray, R_WG: np.ndarray | None = None
-    ) -> np.ndarray:
-        """The pad gap [m] from logged body poses (..., nbody, 3) and (..., nbody, 4, wxyz),
-        vectorised over the leading axes; ``R_WG`` (..., 3, 3), the tool site's rotation at
-        the same state, if known, saves computing the closing axis."""
-        y_W = None if R_WG is None else R_WG[..., :, 1]
-        return self.robot.gap_from_body_poses(body_pos, body_quat, y_W)
-
     def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
         """The pad sensors' contact slots from sensordata of shape (..., nsensordata).
 
@@ -404,18 +267,10 @@ class Scene:
             [found, f_normal, f_t1, f_t2] (contact count; force on the pad in the contact
             frame [N]; unused slots are zero), sensors in :attr:`pad_force_sensor_adr` order.
         """
-        n = 4 * self.pad_force_slots
+        n = 4 * self.robot.pad_force_slots
         rows = [sensordata[..., a : a + n] for a in self.pad_force_sensor_adr.tolist()]
-        shape = (*sensordata.shape[:-1], len(rows), self.pad_force_slots, 4)
+        shape = (*sensordata.shape[:-1], len(rows), self.robot.pad_force_slots, 4)
         return np.stack(rows, axis=-2).reshape(shape)
-
-    def pad_normal_forces(self, sensordata: np.ndarray) -> np.ndarray:
-        """Normal force [N] of the brick on the +y and the -y pads, shape (..., 2), from
-        sensordata of shape (..., nsensordata)."""
-        per_sensor = self.pad_sensor_rows(sensordata)[..., 1].sum(axis=-1)
-        sides = np.zeros((len(self.pad_sensor_side), 2))
-        sides[np.arange(len(self.pad_sensor_side)), self.pad_sensor_side] = 1.0
-        return np.asarray(per_sensor @ sides)
 
     # ------------------------------------------------------------------ the world
 
@@ -466,11 +321,8 @@ class Scene:
         data.qpos[adr + 3 : adr + 7] = X_WO.rotation().wxyz  # position and quaternion
 
     def make_data(self) -> mujoco.MjData:
-        """Return fresh MjData reset to the home keyframe."""
-        data = mujoco.MjData(self.model)
-        mujoco.mj_resetDataKeyframe(self.model, data, self.home_key_id)
-        mujoco.mj_forward(self.model, data)
-        return data
+        """Fresh MjData of this scene's model reset to the home keyframe."""
+        return self.robot.make_data(self.model)
 
 
 def parse_scene(path: Path) -> mujoco.MjSpec:
