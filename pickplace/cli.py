@@ -469,14 +469,14 @@ def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 
 def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.robot.registry import resolve_description
-    from pickplace.run.runner import plan_report
+    from pickplace.run.runner import plan_report, resolve_request
 
     req = _task_request(args)
-    report = plan_report(req)
+    resolved = resolve_request(req)
+    report = plan_report(resolved)
     out = {
         "scenario": req.scenario,
-        "robot": resolve_description(req.robot).name,
+        "robot": resolved.robot.name,
         "controller": req.controller,
         "seed": req.seed,
         **report.as_dict(),
@@ -596,7 +596,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
         address=args.address,
         robot=args.robot or DEFAULT_ROBOT,
     )
-    req.validate()
+    resolved = req.validate()
     output = None
     if args.record is not None:
         validate_record_path(args.record)
@@ -613,7 +613,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
         stop.arm()
         try:
-            report = run_sweep(req, on_trial=advance)
+            report = run_sweep(resolved, on_trial=advance)
         finally:
             stop.disarm()
             if progress is not None:

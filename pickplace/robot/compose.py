@@ -29,7 +29,7 @@ from pickplace.robot.calibration import (
     calibrate_gripper,
 )
 from pickplace.robot.description import RobotDescription
-from pickplace.robot.mjcf import load_part
+from pickplace.robot.mjcf import load_part, parse_world
 from pickplace.robot.parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
 from pickplace.robot.physics import set_stiff_pad, unique_name
 from pickplace.robot.registry import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
@@ -86,17 +86,7 @@ def clear_calibration_cache() -> None:
 def _world_spec(world: Path | mujoco.MjSpec | None) -> mujoco.MjSpec:
     if isinstance(world, mujoco.MjSpec):
         return world.copy()
-    path = Path(world) if world is not None else DEFAULT_WORLD
-    path = path.resolve()
-    if not path.is_file():
-        raise RobotError(f"world file '{path}' does not exist; valid: an MJCF world file")
-    try:
-        return mujoco.MjSpec.from_file(str(path))
-    except ValueError as exc:
-        detail = " ".join(str(exc).split())
-        raise RobotError(
-            f"world file '{path}' is not valid MJCF: {detail}; valid: a file MuJoCo loads"
-        ) from exc
+    return parse_world(Path(world) if world is not None else DEFAULT_WORLD)
 
 
 def _calibration_key(
@@ -324,6 +314,7 @@ class Robot:
         p_W_base: Anchor of the first arm joint at the model's reference posture [m].
         flange_body_id: The arm body the gripper is mounted on.
         home_key_id: The ``home`` keyframe.
+        home_width: Gripper gap of the ``home`` keyframe [m].
         calibration: The gripper calibration (gap map, pads, tool point, footprint).
         repairs: What composition changed in the files, one line each.
     """
@@ -370,6 +361,7 @@ class Robot:
     p_W_base: np.ndarray
     flange_body_id: int
     home_key_id: int
+    home_width: float
     calibration: GripperCalibration = field(repr=False)
     repairs: tuple[str, ...] = ()
 
@@ -377,6 +369,17 @@ class Robot:
     def n_joints(self) -> int:
         """Number of arm joints."""
         return len(self.arm_joint_names)
+
+    def write_home(self, model: mujoco.MjModel, q_home: np.ndarray, width: float) -> None:
+        """Write the home posture ``q_home`` [rad] and the gripper at gap ``width`` [m] into
+        ``model``'s ``home`` keyframe (positions and the commands that hold them; the rest of
+        the keyframe is ``qpos0`` and no command). The one writer of the keyframe: the
+        composition, the scene and the loader's home choice all call it."""
+        key = self.home_key_id
+        model.key_qpos[key, self.arm_qpos_adr] = q_home
+        model.key_qpos[key, model.jnt_qposadr[self.gripper_joint_ids]] = self.qpos_for_width(width)
+        model.key_ctrl[key, self.arm_actuator_ids] = q_home
+        model.key_ctrl[key, self.gripper_actuator_ids] = self.ctrl_for_width(width)
 
     def ctrl_for_width(self, width: float) -> np.ndarray:
         """Gripper command that holds the free fingers at gap ``width`` [m].
@@ -628,6 +631,7 @@ def load_robot(
     src = str(desc.source)
     composed = _compose(world, desc, brick_geom, pad_slots)
     spec, calib = composed.spec, composed.calibration
+    spec.add_key(name=HOME_KEY)  # filled in once the home is known (Robot.write_home)
     model = _compile(spec, src)
     obj = mujoco.mjtObj
     arm_names = tuple(ARM_PREFIX + j for j in composed.arm.joints)
@@ -649,17 +653,9 @@ def load_robot(
     )
     gripper_joints = _ids(model, obj.mjOBJ_JOINT, tuple(GRIPPER_PREFIX + j for j in calib.joints))
     width = calib.open_width if home_width is None else float(home_width)
-    qpos = model.qpos0.copy()
-    qpos[model.jnt_qposadr[joint_ids]] = q_home
-    qpos[model.jnt_qposadr[gripper_joints]] = calib.qpos_for_width(width)
     arm_acts = _ids(
         model, obj.mjOBJ_ACTUATOR, tuple(ARM_PREFIX + a for a in composed.arm.actuators)
     )
-    ctrl = np.zeros(model.nu)
-    ctrl[arm_acts] = q_home
-    ctrl[gripper_acts] = calib.ctrl_for_width(width)
-    spec.add_key(name=HOME_KEY, qpos=qpos.tolist(), ctrl=ctrl.tolist())
-    model = _compile(spec, src)
 
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
@@ -683,7 +679,7 @@ def load_robot(
     in_gripper = np.array([body_names[b].startswith(GRIPPER_PREFIX) for b in model.geom_bodyid])
     key = mujoco.mj_name2id(model, obj.mjOBJ_KEY, HOME_KEY)
     g = desc.gripper
-    return Composition(
+    composition = Composition(
         spec=spec,
         model=model,
         robot=Robot(
@@ -734,7 +730,10 @@ def load_robot(
                 _ids(model, obj.mjOBJ_BODY, (ARM_PREFIX + composed.arm.flange_body,))[0]
             ),
             home_key_id=key,
+            home_width=width,
             calibration=calib,
             repairs=composed.repairs,
         ),
     )
+    composition.robot.write_home(model, q_home, width)
+    return composition

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import mujoco
 
-from pickplace.errors import RobotError
+from pickplace.errors import RobotError, SceneError
 
 _MESH_DIR_ASSETS = ("mesh", "hfield", "skin")
 """Asset tags whose files MuJoCo looks for in ``meshdir``."""
@@ -331,15 +331,44 @@ def _digest(used_angle: str, files: list[Path]) -> str:
     return digest.hexdigest()
 
 
+_Stamp = tuple[str, int, int]  # path, mtime [ns], size [bytes]
+
+_PART_DIGESTS: dict[tuple[Path, str, str | None, Path], tuple[tuple[_Stamp, ...], str]] = {}
+
+
+def _stamps(files: list[Path]) -> tuple[_Stamp, ...] | None:
+    """Each file's modification time and size, or None if one cannot be read."""
+    out = []
+    for f in files:
+        try:
+            st = f.stat()
+        except OSError:
+            return None
+        out.append((str(f), st.st_mtime_ns, st.st_size))
+    return tuple(out)
+
+
 def part_digest(path: Path, field: str, angle: str | None, source: Path | None = None) -> str:
     """:attr:`Part.digest` of a file without loading it into MuJoCo (XML parsing only).
+
+    Remembered per process with the modification time and size of every file it read (the
+    file, its includes and assets): asked again while none of them changed, the files are
+    not read again.
 
     Raises:
         RobotError: As :func:`load_part`, for a missing file, include or asset.
     """
     path = path.resolve()
+    key = (path, field, angle, source or path)
+    known = _PART_DIGESTS.get(key)
+    if known is not None and _stamps([Path(f) for f, _, _ in known[0]]) == known[0]:
+        return known[1]
     _, files, used_angle, _ = _sanitised_tree(path, field, angle, source or path)
-    return _digest(used_angle, files)
+    stamps = _stamps(files)
+    digest = _digest(used_angle, files)
+    if stamps is not None:
+        _PART_DIGESTS[key] = (stamps, digest)
+    return digest
 
 
 def load_part(path: Path, field: str, angle: str | None, source: Path | None = None) -> Part:
@@ -370,3 +399,20 @@ def load_part(path: Path, field: str, angle: str | None, source: Path | None = N
         repairs=tuple(repairs),
         digest=_digest(used_angle, files),
     )
+
+
+def parse_world(path: Path) -> mujoco.MjSpec:
+    """Parse a world file into a spec, turning every failure into a :class:`SceneError`.
+
+    The one parser of world files: the composition, the loader and the run use it.
+    """
+    path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
+    if not path.exists():
+        raise SceneError(f"scene file '{path}' does not exist; valid: an MJCF world file")
+    if not path.is_file():
+        raise SceneError(f"scene path '{path}' is not a file; valid: an MJCF world file")
+    try:
+        return mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
+        detail = " ".join(str(exc).split())
+        raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc

@@ -28,7 +28,8 @@ from pickplace.planning.planner import Candidate, PlanningReport
 from pickplace.planning.preflight import Preflight, PreflightConfig
 from pickplace.planning.timing import TimingConfig
 from pickplace.record.viewer import parse_viewer_url
-from pickplace.robot.registry import DEFAULT_ROBOT, DEFAULT_WORLD
+from pickplace.robot.description import RobotDescription
+from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
 from pickplace.sim.loader import load_scene
 from pickplace.sim.loop import SimConfig, Simulation, TickObserver
 from pickplace.sim.scenarios import BuildRequest, Scenario, get_scenario
@@ -37,7 +38,7 @@ from pickplace.sim.variation import apply_to_scene, apply_to_task
 from pickplace.sim.vary import ParameterDraw
 from pickplace.sim.verdict import RunResult
 from pickplace.world.placements import BrickPlacement, check_brick_in_source_bin
-from pickplace.world.scene import Scene, parse_scene
+from pickplace.world.scene import Scene, WorldFile, read_world
 
 if TYPE_CHECKING:
     from pickplace.record.recording import Recorder
@@ -344,7 +345,7 @@ def _validate_parameters(req: RunRequest, draw: ParameterDraw) -> None:
         )
 
 
-def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, Task]:
+def build_task(req: RunRequest | ResolvedRun, refuse_infeasible: bool = True) -> tuple[Scene, Task]:
     """Validate ``req``, load the scene and build the scenario's task (planning included).
 
     Raises:
@@ -355,24 +356,54 @@ def build_task(req: RunRequest, refuse_infeasible: bool = True) -> tuple[Scene, 
             (field ``brick``: the message gives the first candidate's problem and what would
             help).
     """
-    scenario = validate_request(req)
+    resolved = req if isinstance(req, ResolvedRun) else resolve_request(req)
     with mujoco_warnings() as scene_warnings:
-        scene, task, _ = _scene_and_task(req, scenario, refuse_infeasible)
+        scene, task = _scene_and_task(resolved, refuse_infeasible)
     del scene_warnings  # (only a run reports them, as events)
     return scene, task
 
 
-def _scene_and_task(
-    req: RunRequest, scenario: Scenario, refuse_infeasible: bool
-) -> tuple[Scene, Task, float]:
-    """The scene (its timestep checked), the control rate resolved against it, and the
-    scenario's task; see :func:`build_task`."""
+@dataclass(frozen=True)
+class ResolvedRun:
+    """A run request resolved once, at the edge, and passed down: nothing below parses a
+    file or looks a name up again.
+
+    Attributes:
+        request: The request as given.
+        scenario: Its scenario.
+        world: The world file, read and parsed.
+        robot: The robot's description, read and validated.
+        control_rate_hz: The control rate [Hz]: a whole number of the world's physics steps.
+    """
+
+    request: RunRequest
+    scenario: Scenario
+    world: WorldFile
+    robot: RobotDescription
+    control_rate_hz: float
+
+
+def resolve_request(req: RunRequest) -> ResolvedRun:
+    """Validate ``req`` and resolve what it names: the scenario, the world file (its
+    timestep checked), the control rate against that timestep, and the robot's description.
+
+    Raises:
+        PickPlaceError: Any invalid input (see :func:`validate_request`), a bad world file or
+            timestep, a control rate that is not a whole number of physics steps, or a bad
+            robot description.
+    """
+    scenario = validate_request(req)
     # The world's timestep first: the robot is composed and calibrated at it.
-    world = req.scene_path if req.scene_path is not None else DEFAULT_WORLD
-    timestep = float(parse_scene(Path(world)).option.timestep)
-    check_timestep(req.scene_path, timestep)
-    rate = resolve_control_rate(req.run_control_rate_hz, timestep)
-    scene = load_scene(req.scene_path, req.robot)
+    world = read_world(req.scene_path)
+    check_timestep(req.scene_path, world.timestep)
+    rate = resolve_control_rate(req.run_control_rate_hz, world.timestep)
+    return ResolvedRun(req, scenario, world, resolve_description(req.robot), rate)
+
+
+def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, Task]:
+    """The scene and the scenario's task of a resolved request; see :func:`build_task`."""
+    req, scenario = run.request, run.scenario
+    scene = load_scene(run.world, run.robot)
     if req.parameters is not None:  # before planning: the planner must know the brick
         scene = apply_to_scene(scene, req.parameters)
     if req.brick is not None:
@@ -403,10 +434,10 @@ def _scene_and_task(
             "lists every candidate)",
             field="brick",
         )
-    return scene, task, rate
+    return scene, task
 
 
-def plan_report(req: RunRequest) -> PlanningReport:
+def plan_report(req: RunRequest | ResolvedRun) -> PlanningReport:
     """The planning of ``req``'s scenario without physics (``pickplace plan``): its candidates
     and their pre-flights. A scenario that executes its plan without a pre-flight gets one
     here, as a single candidate, so that every plan can be asked whether it is feasible.
@@ -418,7 +449,8 @@ def plan_report(req: RunRequest) -> PlanningReport:
     if task.planning is not None:
         return task.planning
     t0 = time.perf_counter()
-    result = Preflight(scene, req.controller).run(task.plan, task.X_WO_start, task.goal.X_WO_goal)
+    controller = req.request.controller if isinstance(req, ResolvedRun) else req.controller
+    result = Preflight(scene, controller).run(task.plan, task.X_WO_start, task.goal.X_WO_goal)
     candidate = Candidate("the scenario's plan (executed without a pre-flight)", task.plan, result)
     chosen = 0 if result.feasible else None
     return PlanningReport((candidate,), chosen, time.perf_counter() - t0, PreflightConfig())
@@ -442,9 +474,10 @@ def prepare(req: RunRequest) -> tuple[Scene, Task, Simulation]:
 
 def _build(req: RunRequest) -> tuple[Scene, Task, Simulation, Recorder | None]:
     """:func:`prepare`, also returning the recorder it added (or None)."""
-    scenario = validate_request(req)
+    resolved = resolve_request(req)
+    rate = resolved.control_rate_hz
     with mujoco_warnings() as scene_warnings:
-        scene, task, rate = _scene_and_task(req, scenario, refuse_infeasible=True)
+        scene, task = _scene_and_task(resolved, refuse_infeasible=True)
         config = SimConfig(control_rate_hz=rate)
         controller = make_controller(req.controller, scene, 1.0 / rate)
     observers: list[TickObserver] = list(req.observers)
@@ -536,6 +569,7 @@ class Pacer:
 
 
 __all__ = [
+    "ResolvedRun",
     "RunOutcome",
     "RunRequest",
     "build_task",
@@ -543,6 +577,7 @@ __all__ = [
     "plan_report",
     "prepare",
     "resolve_control_rate",
+    "resolve_request",
     "run",
     "valid_control_rates",
     "validate_record_path",

@@ -28,7 +28,6 @@ import hashlib
 from pathlib import Path
 
 import mujoco
-import numpy as np
 
 from pickplace.errors import UnknownNameError
 from pickplace.planning.home import choose_home
@@ -37,11 +36,10 @@ from pickplace.robot.compose import PAD_SENSOR_SLOTS, load_robot
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import (
     DEFAULT_ROBOT,
-    DEFAULT_WORLD,
     description_digest,
     resolve_description,
 )
-from pickplace.world.scene import Scene, WorldNames, build_scene, parse_scene
+from pickplace.world.scene import Scene, WorldFile, WorldNames, build_scene, read_world
 
 _SCENES: dict[str, Scene] = {}
 
@@ -52,7 +50,7 @@ def clear_scene_cache() -> None:
 
 
 def load_scene(
-    world: str | Path | None = None,
+    world: str | Path | WorldFile | None = None,
     robot: str | Path | RobotDescription = DEFAULT_ROBOT,
     *,
     names: WorldNames | None = None,
@@ -61,7 +59,8 @@ def load_scene(
     """The world with the robot composed into it, its home chosen (see the module docstring).
 
     Args:
-        world: World MJCF file; default ``scenes/world.xml``.
+        world: World MJCF file, or the file already read
+            (:func:`~pickplace.world.scene.read_world`); default ``scenes/world.xml``.
         robot: A bundled robot's name (:func:`pickplace.robot.compose.bundled_robots`), a
             ``robot.toml`` path, or a description.
         names: World names to resolve; default :class:`~pickplace.world.scene.WorldNames`.
@@ -73,20 +72,15 @@ def load_scene(
         RobotError: The robot description or a file it names is missing or unusable (one line
             naming the file, the field and what would be valid).
     """
-    path = (Path(world) if world is not None else DEFAULT_WORLD).resolve()
-    try:
-        content = path.read_bytes()
-    except OSError:
-        parse_scene(path)  # raises the SceneError that names what is wrong with the path
-        raise
+    file = world if isinstance(world, WorldFile) else read_world(world)
     desc = resolve_description(robot)
     names = names or WorldNames()
-    key = hashlib.sha256(content)
-    for part in (str(path), description_digest(desc), repr(names), str(pad_slots)):
+    key = hashlib.sha256(file.content)
+    for part in (str(file.path), description_digest(desc), repr(names), str(pad_slots)):
         key.update(part.encode())
     template = _SCENES.get(key.hexdigest())
-    if template is None:  # parsed only to compose: a cached scene's file parsed before
-        template = _compose(parse_scene(path), path, desc, names, pad_slots)
+    if template is None:
+        template = _compose(file.spec, file.path, desc, names, pad_slots)
         _SCENES[key.hexdigest()] = template
     return dataclasses.replace(template, model=copy.deepcopy(template.model))
 
@@ -103,14 +97,6 @@ def _compose(
     if len(robot.home_candidates) > 1:
         q_home = choose_home(scene, robot.home_candidates)
     width = for_gripper(DEFAULT_PLAN_CONFIG, robot.calibration).open_width
-    _set_home(scene, q_home, width)
-    return dataclasses.replace(scene, robot=dataclasses.replace(robot, q_home=q_home.copy()))
-
-
-def _set_home(scene: Scene, q_home: np.ndarray, width: float) -> None:
-    """Write the home posture and the gripper at ``width`` [m] into the ``home`` keyframe."""
-    m, r, key = scene.model, scene.robot, scene.robot.home_key_id
-    m.key_qpos[key, r.arm_qpos_adr] = q_home
-    m.key_qpos[key, scene.gripper_qpos_adr] = r.qpos_for_width(width)
-    m.key_ctrl[key, r.arm_actuator_ids] = q_home
-    m.key_ctrl[key, r.gripper_actuator_ids] = r.ctrl_for_width(width)
+    robot = dataclasses.replace(robot, q_home=q_home.copy(), home_width=width)
+    robot.write_home(scene.model, q_home, width)
+    return dataclasses.replace(scene, robot=robot)

@@ -33,14 +33,15 @@ import signal
 import sys
 import time
 from collections import deque
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from pickplace.control.controllers import CONTROLLERS
 from pickplace.errors import InvalidInputError, RobotError, UnknownNameError
-from pickplace.robot.registry import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
+from pickplace.robot.description import RobotDescription
+from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
 from pickplace.run.runner import MAX_SEED, resolve_control_rate, validate_request
 from pickplace.signals import STOP_SIGNALS, ignore_in_child
 from pickplace.sim.loader import load_scene
@@ -61,7 +62,7 @@ from pickplace.sweep.trial import (
     lost_trial,
     run_trial,
 )
-from pickplace.world.scene import parse_scene
+from pickplace.world.scene import read_world
 
 MAX_TRIALS = 100_000
 BACKENDS = ("process", "ray")
@@ -99,12 +100,6 @@ class Comparison:
             for v in values:
                 if v not in CONTROLLERS:
                     raise UnknownNameError("controller", v, CONTROLLERS)
-        if self.key == "robot":
-            for v in values:
-                try:
-                    resolve_description(v)
-                except RobotError as exc:  # unknown name or a bad robot.toml
-                    raise InvalidInputError(f"--compare robot=...: {exc}") from exc
         object.__setattr__(self, "values", values)
 
     def flag(self) -> str:
@@ -204,8 +199,15 @@ class SweepRequest:
             return 0
         return available_cpus()
 
-    def validate(self) -> None:
-        """Raise InvalidInputError / UnknownNameError for an invalid sweep."""
+    def validate(self) -> ResolvedSweep:
+        """Check the sweep and resolve what it names, once: every arm's robot description,
+        the world's timestep for the control rates, a Ray cluster's address.
+
+        Raises:
+            InvalidInputError: An invalid field (the message names it and the valid range).
+            UnknownNameError: An unknown scenario, controller or parameter.
+            RobotError: A robot description cannot be used.
+        """
         if self.backend not in BACKENDS:
             raise InvalidInputError(
                 f"--backend must be one of {', '.join(BACKENDS)}, got '{self.backend}'"
@@ -216,8 +218,16 @@ class SweepRequest:
             key = self.compare.key
             if getattr(self, key) != next(f.default for f in fields(self) if f.name == key):
                 raise given_and_compared(key)
+        robots: dict[str, RobotDescription] = {}
         for spec in self.specs():
-            resolve_description(spec.robot)
+            if spec.robot in robots:
+                continue
+            try:
+                robots[spec.robot] = resolve_description(spec.robot)
+            except RobotError as exc:  # unknown name or a bad robot.toml
+                if self.compare is None or self.compare.key != "robot":
+                    raise
+                raise InvalidInputError(f"--compare robot=...: {exc}") from exc
         for spec in self.specs():
             validate_request(spec.request(self.first_seed))
         if not 1 <= self.trials <= MAX_TRIALS:
@@ -238,6 +248,7 @@ class SweepRequest:
             require_ray()
             if self.address is not None:
                 check_address(self.address)
+        return ResolvedSweep(self, robots)
 
     def _validate_control_rates(self) -> None:
         """Every control rate the trials use is a whole number of the scene's steps."""
@@ -246,9 +257,22 @@ class SweepRequest:
             rates = set(self.vary.spec("control_rate").values)
         if rates == {100.0}:
             return  # the runner's default: valid for every usable timestep
-        timestep = float(parse_scene(DEFAULT_WORLD).option.timestep)
+        timestep = read_world().timestep
         for rate in sorted(rates):
             resolve_control_rate(rate, timestep)
+
+
+@dataclass(frozen=True)
+class ResolvedSweep:
+    """A sweep checked once (:meth:`SweepRequest.validate`), with what it resolved.
+
+    Attributes:
+        request: The sweep.
+        robots: Each arm's robot as given (name or path) → its description.
+    """
+
+    request: SweepRequest
+    robots: Mapping[str, RobotDescription]
 
 
 def jobs_of(req: SweepRequest) -> list[Job]:
@@ -257,14 +281,15 @@ def jobs_of(req: SweepRequest) -> list[Job]:
     return [(a, seed) for seed in req.seeds for a in range(n)]
 
 
-def run_sweep(req: SweepRequest, on_trial: Add | None = None) -> dict[str, Any]:
+def run_sweep(req: SweepRequest | ResolvedSweep, on_trial: Add | None = None) -> dict[str, Any]:
     """Run every trial of ``req`` and return the report (JSON-serialisable, see
     :func:`pickplace.sweep.report.sweep_report`).
 
     ``on_trial`` gets each trial's compact summary (or lost-trial entry) as it arrives. An
     interrupt (KeyboardInterrupt) stops the sweep and returns the partial report.
     """
-    req.validate()
+    resolved = req if isinstance(req, ResolvedSweep) else req.validate()
+    req = resolved.request
     specs = req.specs()
     jobs = jobs_of(req)
     wall0 = time.perf_counter()
@@ -281,8 +306,8 @@ def run_sweep(req: SweepRequest, on_trial: Add | None = None) -> dict[str, Any]:
     try:
         # Composed and calibrated once, here: forked workers inherit the cached scenes (and a
         # bad robot file is refused before any trial).
-        for robot in dict.fromkeys(spec.robot for spec in specs):
-            load_scene(robot=robot)
+        for desc in resolved.robots.values():
+            load_scene(robot=desc)
         if req.backend == "ray":
             workers, start_s = run_ray(specs, jobs, add, req.address, req.workers)
         elif workers == 1:

@@ -23,7 +23,9 @@ from mink.lie import SE3, SO3
 
 from pickplace.errors import SceneError, UnknownNameError
 from pickplace.robot.compose import Composition, Robot
+from pickplace.robot.mjcf import parse_world
 from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
+from pickplace.robot.registry import DEFAULT_WORLD
 
 __all__ = [
     "ROBOT_CONAFFINITY",
@@ -31,11 +33,12 @@ __all__ = [
     "BinGeometry",
     "Contact",
     "Scene",
+    "WorldFile",
     "WorldNames",
     "build_scene",
     "name_to_id",
     "names_of",
-    "parse_scene",
+    "read_world",
 ]
 
 _OBJ_KIND = {
@@ -325,18 +328,39 @@ class Scene:
         return self.robot.make_data(self.model)
 
 
-def parse_scene(path: Path) -> mujoco.MjSpec:
-    """Parse a world file into a spec, turning every failure into a :class:`SceneError`."""
-    path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
-    if not path.exists():
-        raise SceneError(f"scene file '{path}' does not exist; valid: an MJCF world file")
-    if not path.is_file():
-        raise SceneError(f"scene path '{path}' is not a file; valid: an MJCF world file")
+@dataclass(frozen=True)
+class WorldFile:
+    """A world file read and parsed once, at the edge of a request.
+
+    Attributes:
+        path: The file, resolved.
+        content: Its bytes (the scene cache's key).
+        spec: Its parsed spec; never changed (the composition works on a copy).
+    """
+
+    path: Path
+    content: bytes = field(repr=False)
+    spec: mujoco.MjSpec = field(repr=False, compare=False)
+
+    @property
+    def timestep(self) -> float:
+        """The world's physics timestep [s] (``<option timestep>``)."""
+        return float(self.spec.option.timestep)
+
+
+def read_world(path: str | Path | None = None) -> WorldFile:
+    """Read and parse a world file (default ``scenes/world.xml``).
+
+    Raises:
+        SceneError: The file is missing, not a file or not valid MJCF.
+    """
+    resolved = (Path(path) if path is not None else DEFAULT_WORLD).resolve()
+    spec = parse_world(resolved)
     try:
-        return mujoco.MjSpec.from_file(str(path))
-    except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
-        detail = " ".join(str(exc).split())
-        raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
+        content = resolved.read_bytes()
+    except OSError as exc:
+        raise SceneError(f"scene file '{resolved}' cannot be read: {exc.strerror}") from exc
+    return WorldFile(resolved, content, spec)
 
 
 def _world_contact_bodies(model: mujoco.MjModel, robot: np.ndarray, brick_body: int) -> list[int]:
@@ -421,6 +445,7 @@ def build_scene(composition: Composition, path: Path, names: WorldNames | None =
     pad_side = np.concatenate(
         [np.full(len(adr), side, dtype=int) for side, adr in enumerate(robot.pad_force_sensor_adr)]
     )
+    robot.write_home(model, robot.q_home, robot.home_width)  # the spec's keyframe is empty
     data = robot.make_data(model)
     return Scene(
         model=model,
