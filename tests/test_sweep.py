@@ -19,10 +19,10 @@ from pickplace.sweep.stats import compare_paired
 from pickplace.sweep.sweep import (
     SWEEP_WALL_TIME_FIELDS,
     SweepRequest,
-    compact_summary,
     parse_compare,
     run_sweep,
 )
+from pickplace.sweep.trial import TRIAL_KEYS
 from tests.conftest import REPO, run_cli, run_cli_json
 from tests.test_recording import read_entities
 
@@ -113,7 +113,9 @@ def test_a_failed_trial_re_runs_alone_from_the_printed_command(varied: dict) -> 
     code, summary = run_cli_json(*command[2:])
     assert code == 1
     trial = next(t for t in varied["trial_results"] if t["seed"] == failure["example_seed"])
-    assert compact_summary(summary) == trial
+    assert {k: summary[k] for k in TRIAL_KEYS} == {k: trial[k] for k in TRIAL_KEYS}
+    failure_event = next(e["text"] for e in summary["events"] if e["kind"] == "failure")
+    assert trial["failure_text"].startswith(failure_event)
     assert summary["failure"] == reason
 
 

@@ -75,6 +75,7 @@ from pickplace.errors import InvalidInputError, OutputError, RecordingError, req
 from pickplace.outfile import OutputFile
 from pickplace.record.viewer import FINISH_TIMEOUT_S, ViewerRelay, parse_viewer_url, spawn_viewer
 from pickplace.signals import deferred_interrupts
+from pickplace.sim.events import EventKind
 
 if TYPE_CHECKING:
     from pickplace.sim.events import Event
@@ -791,7 +792,7 @@ class Recorder:
                 self.warnings.append(text)
                 relay.kill()
                 if run is not None:
-                    run.emit("viewer", text, level="warn")
+                    run.emit(EventKind.VIEWER, text, level="warn")
 
     def _finish(self, run: Simulation, *, interrupted: bool) -> None:
         """Hand the rest to the viewers, write the file, close the stream, let the viewers
@@ -861,7 +862,7 @@ class Recorder:
             self._early_events.append(event)  # e.g. scene warnings emitted before the run
             return
         self._log_event(event.tick, event.t, event.level, event.text)
-        if event.kind == "verdict":
+        if event.kind is EventKind.VERDICT:
             self._verdict_logged = True
 
     def on_finish(self, run: Simulation, result: RunResult) -> None:

@@ -30,6 +30,7 @@ from pickplace.planning.timing import TimingConfig
 from pickplace.record.viewer import parse_viewer_url
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
+from pickplace.sim.events import EventKind
 from pickplace.sim.loader import load_scene
 from pickplace.sim.loop import SimConfig, Simulation, TickObserver
 from pickplace.sim.scenarios import BuildRequest, Scenario, get_scenario
@@ -496,7 +497,7 @@ def _build(req: RunRequest) -> tuple[Scene, Task, Simulation, Recorder | None]:
         observers.append(recorder)
     sim = Simulation(scene, task, controller, config, observers)
     for text in scene_warnings:
-        sim.emit("mujoco-warning", f"MuJoCo: {text}", level="warn", tick=0)
+        sim.emit(EventKind.MUJOCO_WARNING, f"MuJoCo: {text}", level="warn", tick=0)
     return scene, task, sim, recorder
 
 

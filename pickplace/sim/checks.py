@@ -26,7 +26,7 @@ import numpy as np
 
 from pickplace.control.controllers import IK_STATUSES, IKStatus
 from pickplace.planning.plan import Plan, grasp_width
-from pickplace.sim.events import Emit
+from pickplace.sim.events import Emit, EventKind
 from pickplace.sim.ticklog import CONTROLLER_NONFINITE, FINITE, TickLog
 from pickplace.world.scene import Scene
 
@@ -328,7 +328,7 @@ class GraspMonitor(Check):
                 gap = float(log.gripper_gap[k])
                 f = forces[i]
                 emit(
-                    "grasp",
+                    EventKind.GRASP,
                     f"grip closed: gap {gap * 1000:.1f} mm, pad forces {f[0]:.1f} / {f[1]:.1f} N",
                     tick=k,
                 )
@@ -367,7 +367,12 @@ class GraspMonitor(Check):
                     if s > cr.drop_slip
                     else f"no pad contact for {cr.drop_contact_loss:.2f} s"
                 )
-                emit("drop", f"brick left the gripper at t={t:.3f} s: {why}", level="error", tick=k)
+                emit(
+                    EventKind.DROP,
+                    f"brick left the gripper at t={t:.3f} s: {why}",
+                    level="error",
+                    tick=k,
+                )
                 if failure is None:
                     failure = Failure(
                         k, FailureReason.DROPPED, f"brick left the gripper at t={t:.3f} s ({why})"
@@ -376,7 +381,7 @@ class GraspMonitor(Check):
             elif t >= t_release - 1e-9:
                 self.state = GraspState.RELEASED
                 gap = float(log.gripper_gap[k])
-                emit("release", f"gripper opened: gap {gap * 1000:.1f} mm", tick=k)
+                emit(EventKind.RELEASE, f"gripper opened: gap {gap * 1000:.1f} mm", tick=k)
         return failure
 
 

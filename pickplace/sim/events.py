@@ -2,10 +2,39 @@
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 from typing import Protocol
 
 EVENT_LEVELS: tuple[str, ...] = ("info", "warn", "error")
+
+
+class EventKind(str, enum.Enum):
+    """What an event is about. A ``str`` enum: it compares equal to, and serialises as, its
+    value (``"failure"``), which is what the summary's ``events[].kind`` holds."""
+
+    KEYFRAME = "keyframe"
+    """The plan passed a keyframe."""
+    GRASP = "grasp"
+    """The gripper closed on the brick and holds it."""
+    RELEASE = "release"
+    """The gripper opened and let the brick go."""
+    DROP = "drop"
+    """The brick left the gripper while it should be held."""
+    FAULT = "fault"
+    """An injected fault took effect."""
+    FAILURE = "failure"
+    """A check failed: the run's failure reason and its text."""
+    VERDICT = "verdict"
+    """The run's verdict (or that it was interrupted)."""
+    PLAN = "plan"
+    """What the plan could not honour (a warning at tick 0), or the chosen plan."""
+    SENSOR = "sensor"
+    """A contact sensor saw more contacts than it reports."""
+    MUJOCO_WARNING = "mujoco-warning"
+    """MuJoCo warned while composing or simulating."""
+    VIEWER = "viewer"
+    """A live viewer stopped answering or went away."""
 
 
 @dataclass(frozen=True)
@@ -16,19 +45,21 @@ class Event:
         tick: Control tick index k.
         t: Simulated time at the start of the tick, k · dt [s].
         level: One of :data:`EVENT_LEVELS`.
-        kind: Short category, e.g. ``"grasp"``, ``"fault"``, ``"failure"``, ``"verdict"``.
+        kind: What it is about.
         text: One line for a person.
     """
 
     tick: int
     t: float
     level: str
-    kind: str
+    kind: EventKind
     text: str
 
 
 class Emit(Protocol):
     """Records an event at ``tick`` (the run's current tick when omitted)."""
 
-    def __call__(self, kind: str, text: str, level: str = "info", tick: int | None = None) -> None:
+    def __call__(
+        self, kind: EventKind, text: str, level: str = "info", tick: int | None = None
+    ) -> None:
         """Record the event."""

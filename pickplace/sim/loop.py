@@ -41,7 +41,7 @@ from pickplace.errors import ControllerError, InvalidInputError, require_positiv
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PlanningReport
 from pickplace.sim.checks import Check, CheckContext, FailureReason, SuccessCriteria
-from pickplace.sim.events import Event
+from pickplace.sim.events import Event, EventKind
 from pickplace.sim.task import Task
 from pickplace.sim.ticklog import CONTROLLER_NONFINITE, FINITE, STATE_NONFINITE, TickLog
 from pickplace.sim.verdict import RunResult, brick_pose, run_metrics
@@ -210,7 +210,9 @@ class Simulation:
 
     # ------------------------------------------------------------------ events
 
-    def emit(self, kind: str, text: str, level: str = "info", tick: int | None = None) -> None:
+    def emit(
+        self, kind: EventKind, text: str, level: str = "info", tick: int | None = None
+    ) -> None:
         """Record an event at ``tick`` (default: the current tick).
 
         An event of a simulated tick is stamped with the time the tick ends, (tick + 1)·dt,
@@ -232,7 +234,7 @@ class Simulation:
         self.failure = reason
         self.failure_tick = tick
         self._stop_tick = tick + round(self.criteria.failure_grace / self.dt)
-        self.emit("failure", f"{reason.value}: {text}", level="error", tick=tick)
+        self.emit(EventKind.FAILURE, f"{reason.value}: {text}", level="error", tick=tick)
 
     # ------------------------------------------------------------------ loop
 
@@ -261,12 +263,12 @@ class Simulation:
         if interrupted:
             self.failure = FailureReason.INTERRUPTED
             self.failure_tick = self.ticks
-            self.emit("verdict", "interrupted by the user", level="warn")
+            self.emit(EventKind.VERDICT, "interrupted by the user", level="warn")
         result = self._result(wall)
         if not interrupted:
             level = "info" if result.success else "error"
             verdict = "success" if result.success else f"failure: {result.failure}"
-            self.emit("verdict", f"verdict: {verdict}", level=level)
+            self.emit(EventKind.VERDICT, f"verdict: {verdict}", level=level)
             result.events = self._sorted_events()
         for obs in self.observers:
             obs.on_finish(self, result)
@@ -279,7 +281,7 @@ class Simulation:
             if c.preflight.problem is not None:
                 p = c.preflight.problem
                 self.emit(
-                    "plan",
+                    EventKind.PLAN,
                     f"plan candidate '{c.label}' rejected: at t={p.t:.2f} s {p.text}",
                     level="warn",
                     tick=0,
@@ -293,10 +295,10 @@ class Simulation:
             return
         chosen = planning.candidates[planning.chosen]
         if chosen.warning is not None:
-            self.emit("plan", chosen.warning, level="warn", tick=0)
+            self.emit(EventKind.PLAN, chosen.warning, level="warn", tick=0)
         m = chosen.preflight
         self.emit(
-            "plan",
+            EventKind.PLAN,
             f"plan '{chosen.label}' chosen (candidate {planning.chosen + 1} of "
             f"{len(planning.candidates)}): min clearance {m.min_clearance * 1000:.1f} mm, "
             f"min joint margin {m.min_joint_margin:.3f} rad, peak speed ratio "
@@ -413,7 +415,7 @@ class Simulation:
         for fault in self.task.faults:
             text = fault.apply(self, k)
             if text:
-                self.emit("fault", f"fault '{fault.name}': {text}", level="warn")
+                self.emit(EventKind.FAULT, f"fault '{fault.name}': {text}", level="warn")
         v.ctrl[self._robot_ctrl] = log.ctrl[k]
         mujoco.mj_step(self.model, self.data, self.substeps)
         # MuJoCo checks qpos, qvel and qacc every step and resets the data (time back to 0)
@@ -433,7 +435,7 @@ class Simulation:
         log.sensordata[k] = v.sensordata
 
     def _on_mujoco_warning(self, message: str) -> None:
-        self.emit("mujoco-warning", f"MuJoCo: {message}", level="warn")
+        self.emit(EventKind.MUJOCO_WARNING, f"MuJoCo: {message}", level="warn")
 
     # ------------------------------------------------------------------ assessment
 
@@ -470,7 +472,7 @@ class Simulation:
             tick, found = overflow
             slots = self.scene.robot.pad_force_slots
             self.emit(
-                "sensor",
+                EventKind.SENSOR,
                 f"a pad touched the brick in {found} points but its sensor reports {slots}: "
                 "the grip force is underestimated",
                 level="warn",
@@ -489,7 +491,7 @@ class Simulation:
             self._next_keyframe += 1
             err = self.log.position_error[k]
             self.emit(
-                "keyframe",
+                EventKind.KEYFRAME,
                 f"keyframe '{name}' reached (planned t={kt:.2f} s, "
                 f"tool {err * 1000:.1f} mm from plan)",
                 tick=k,
@@ -542,10 +544,7 @@ class Simulation:
                 **run_metrics(self.log, valid, X_WO, X_WO_goal),
                 "cycle_time_s": end if self.ticks * self.dt >= end - 1e-9 else None,
             },
-            plan=None if self.task.planning is None else self.task.planning.as_dict(),
-            planning_time_s=(
-                None if self.task.planning is None else self.task.planning.planning_time_s
-            ),
+            planning=self.task.planning,
             robot=self.scene.robot.name,
             parameters=self.task.parameters,
         )

@@ -17,8 +17,9 @@ from mink.lie import SE3, SO3
 
 from pickplace.control.controllers import IK_STATUSES
 from pickplace.geometry import box_corners, transform_points
+from pickplace.planning.planner import PlanningReport
 from pickplace.sim.checks import FailureReason, SuccessCriteria
-from pickplace.sim.events import Event
+from pickplace.sim.events import Event, EventKind
 from pickplace.sim.ticklog import TickLog
 from pickplace.world.scene import BinGeometry, Scene
 
@@ -132,7 +133,8 @@ def run_metrics(log: TickLog, ticks: int, X_WO_final: SE3, X_WO_goal: SE3 | None
 
 @dataclass
 class RunResult:
-    """Outcome of one run; :meth:`summary` is the JSON the CLI prints."""
+    """Outcome of one run, read by attribute (a sweep's trial, the CLI); :meth:`summary` is
+    the JSON the CLI prints, derived from it here and nowhere else."""
 
     scenario: str
     controller: str
@@ -150,11 +152,22 @@ class RunResult:
     target_xyz: list[float]
     events: list[Event]
     metrics: dict[str, Any]
-    plan: dict[str, Any] | None = None
-    planning_time_s: float | None = None
+    planning: PlanningReport | None = None
     recording: str | None = None
     robot: str | None = None
     parameters: dict[str, Any] | None = None
+
+    @property
+    def failure_text(self) -> str | None:
+        """The failure event's text (``"dropped: ..."``), and for ``no-feasible-plan`` the
+        first candidate's first problem; None for a success."""
+        text = next((e.text for e in self.events if e.kind is EventKind.FAILURE), None)
+        if self.failure is FailureReason.NO_FEASIBLE_PLAN and self.planning is not None:
+            problems = [c.preflight.problem for c in self.planning.candidates]
+            first = next((p for p in problems if p is not None), None)
+            if first is not None:
+                text = f"{text}; first candidate: {first.kind}: {first.text}"
+        return text
 
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable summary (the keys are an interface: see the README)."""
@@ -178,10 +191,11 @@ class RunResult:
             "ticks": self.ticks,
         }
         out.update(self.metrics)
-        out["planning_time_s"] = self.planning_time_s
-        out["plan"] = self.plan
+        planning = self.planning
+        out["planning_time_s"] = None if planning is None else planning.planning_time_s
+        out["plan"] = None if planning is None else planning.as_dict()
         out["events"] = [
-            {"tick": e.tick, "t": e.t, "level": e.level, "kind": e.kind, "text": e.text}
+            {"tick": e.tick, "t": e.t, "level": e.level, "kind": e.kind.value, "text": e.text}
             for e in self.events
         ]
         out["recording"] = self.recording

@@ -19,6 +19,7 @@ from typing import Any
 from pickplace.robot.registry import DEFAULT_ROBOT
 from pickplace.run.runner import RunRequest, run
 from pickplace.sim.vary import VaryPlan
+from pickplace.sim.verdict import RunResult
 
 WORKER_DIED = "worker-died"
 WORKER_ERROR = "worker-error"
@@ -104,21 +105,16 @@ class TrialSpec:
         return shlex.join(args)
 
 
-def compact_summary(summary: dict[str, Any], arm: str = "") -> dict[str, Any]:
-    """The part of a run's summary a sweep keeps (:data:`TRIAL_KEYS`), plus ``failure_text``
-    (the failure event's text; for ``no-feasible-plan`` with the first candidate's problem),
-    ``parameters`` (when varied) and ``arm`` (in a comparison). A non-finite number becomes
-    None (JSON has no NaN)."""
+def compact_summary(result: RunResult, arm: str = "") -> dict[str, Any]:
+    """The part of a run a sweep keeps: the summary's :data:`TRIAL_KEYS`, the result's
+    ``failure_text`` (:attr:`~pickplace.sim.verdict.RunResult.failure_text`), ``parameters``
+    (when varied) and ``arm`` (in a comparison). A non-finite number becomes None (JSON has
+    no NaN)."""
+    summary = result.summary()
     out = {k: _finite_or_none(summary.get(k)) for k in TRIAL_KEYS}
-    text = next((e["text"] for e in summary.get("events", ()) if e["kind"] == "failure"), None)
-    plan = summary.get("plan")
-    if summary.get("failure") == "no-feasible-plan" and plan and plan.get("candidates"):
-        problems = [c["problem"] for c in plan["candidates"] if c.get("problem")]
-        if problems:
-            text = f"{text}; first candidate: {problems[0]['kind']}: {problems[0]['text']}"
-    out["failure_text"] = text
-    if "parameters" in summary:
-        out["parameters"] = summary["parameters"]
+    out["failure_text"] = result.failure_text
+    if result.parameters is not None:
+        out["parameters"] = result.parameters
     if arm:
         out["arm"] = arm
     return out
@@ -133,7 +129,7 @@ def _finite_or_none(value: Any) -> Any:
 
 def run_trial(spec: TrialSpec, seed: int) -> dict[str, Any]:
     """Run one trial and return its compact summary (:func:`compact_summary`)."""
-    return compact_summary(run(spec.request(seed)).summary(), spec.arm)
+    return compact_summary(run(spec.request(seed)), spec.arm)
 
 
 def lost_trial(seed: int, reason: str, detail: str | None = None, arm: str = "") -> dict[str, Any]:
