@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from rerun.chunk import RrdReader
 
-from pickplace.record.recording import build_blueprint
+from pickplace.record.blueprint import build_blueprint
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.loop import Simulation
 from scripts.golden_summaries import first_difference

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from pickplace.record.recording import build_blueprint
+from pickplace.record.blueprint import build_blueprint
 from pickplace.sim.loop import Simulation
 from pickplace.sim.ticklog import TickLog
 from pickplace.world.scene import Scene

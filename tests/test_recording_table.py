@@ -11,7 +11,7 @@ import pytest
 import rerun.blueprint as rrb
 
 from pickplace.errors import InvalidInputError
-from pickplace.record.recording import LIMIT_LINES, PLOTS, LimitLines, Plot, build_blueprint
+from pickplace.record.blueprint import LIMIT_LINES, PLOTS, LimitLines, Plot, build_blueprint
 from pickplace.sim.ticklog import TickLog
 from pickplace.world.scene import Scene
 

@@ -20,7 +20,8 @@ from pathlib import Path
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from pickplace.record.recording import APPLICATION_ID, build_blueprint
+from pickplace.record.blueprint import build_blueprint
+from pickplace.record.recording import APPLICATION_ID
 from pickplace.record.viewer import FINISH_TIMEOUT_S, LENGTH_BYTES
 
 

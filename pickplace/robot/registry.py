@@ -29,8 +29,6 @@ def _world_path() -> Path:
 
 
 ROBOTS_DIR = _robots_dir()
-
-
 DEFAULT_WORLD = _world_path()
 
 
