@@ -214,7 +214,8 @@ def test_report_document(synthetic: dict[str, Any]) -> None:
 def test_metrics_show_the_bad_tail(scene: Scene) -> None:
     plan = parse_vary(["brick_mass=0.2:1"])
     trials, _ = synthetic_trials(scene, plan, range(20))
-    text = report_markdown(trials, {}, plan)
+    req = SweepRequest("pick-place-random", "qp", len(trials), 0, 1, vary=plan)
+    text = report_markdown(sweep_report(req, trials, 1.0))
     sigma = min(t["min_singular_value"] for t in trials)
     (row,) = [line for line in text.splitlines() if line.startswith("| smallest σ")]
     assert row.rstrip(" |").endswith(f"{sigma:.3g}")  # worst = the minimum, not the maximum
@@ -236,10 +237,14 @@ def test_many_failures_are_labelled_but_labels_shown_only_when_few(
 ) -> None:
     plan = parse_vary(["brick_mass=9:12"])  # every trial fails
     trials, draws = synthetic_trials(scene, plan, range(30))
-    write_sweep_recording(tmp_path / "many.rrd", trials, {}, plan, draws, scene=scene)
+    report = sweep_report(SweepRequest(trials=len(trials), workers=1, vary=plan), trials, 1.0)
+    write_sweep_recording(tmp_path / "many.rrd", trials, report, plan, draws, scene=scene)
     many = read_entities(tmp_path / "many.rrd")["world/trials/dropped"].static
     assert len(many["Points3D:labels"]) == 30 and many["Points3D:show_labels"] == [False]
-    write_sweep_recording(tmp_path / "few.rrd", trials[:3], {}, plan, draws[:3], scene=scene)
+    few_report = sweep_report(SweepRequest(trials=3, workers=1, vary=plan), trials[:3], 1.0)
+    write_sweep_recording(
+        tmp_path / "few.rrd", trials[:3], few_report, plan, draws[:3], scene=scene
+    )
     few = read_entities(tmp_path / "few.rrd")["world/trials/dropped"].static
     assert few["Points3D:show_labels"] == [True]
 

@@ -60,7 +60,6 @@ from __future__ import annotations
 import contextlib
 import json
 import time
-import warnings
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -85,6 +84,7 @@ from pickplace.record.archetypes import (
     xyzw,
 )
 from pickplace.record.blueprint import LIMIT_LINES, PLOTS, build_blueprint
+from pickplace.record.rrd_file import read_back_problem
 from pickplace.record.viewer import FINISH_TIMEOUT_S, ViewerRelay, parse_viewer_url, spawn_viewer
 from pickplace.signals import deferred_interrupts
 from pickplace.sim.events import EventKind
@@ -108,22 +108,6 @@ LEVELS = {
     "warn": rr.TextLogLevel.WARN,
     "error": rr.TextLogLevel.ERROR,
 }
-
-
-def _incomplete(path: Path) -> str | None:
-    """None if the .rrd at ``path`` reads back with its footer and the summary, else what is
-    wrong (reads the footer's manifest, not the data: milliseconds)."""
-    from rerun.chunk import RrdReader
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "no footer" is reported below instead
-            entities = RrdReader(path).store().schema().entity_paths()
-    except (RuntimeError, OSError, ValueError) as exc:
-        return f"the file does not read back ({' '.join(str(exc).split())[:200]})"
-    if "/summary" not in entities:
-        return "the file lacks the summary"
-    return None
 
 
 # ---------------------------------------------------------------------------- the plots
@@ -346,7 +330,7 @@ class Recorder:
             return
         temp = self._output.temp
         if self.file_error is None and temp is not None:
-            problem = _incomplete(temp)
+            problem = read_back_problem(temp, "summary")
             if problem is not None:
                 self._file_failed(problem)
         if self.file_error is not None:

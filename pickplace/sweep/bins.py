@@ -49,6 +49,29 @@ class BinStat:
         """``0.2–1.4`` for a range, ``250`` for a grid value (unit not included)."""
         return f"{self.low:g}" if self.low == self.high else f"{self.low:.3g}–{self.high:.3g}"
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> BinStat:
+        """The bin from its JSON form (:meth:`as_dict`, e.g. a report's ``by_parameter``)."""
+        rate = None
+        if d["rate"] is not None:
+            rate = RateInterval(
+                int(d["successes"]),
+                int(d["trials"]),
+                float(d["rate"]),
+                float(d["rate_low"]),
+                float(d["rate_high"]),
+                float(d.get("confidence", DEFAULT_CONFIDENCE)),
+            )
+        return cls(
+            str(d["parameter"]),
+            float(d["low"]),
+            float(d["high"]),
+            int(d["trials"]),
+            int(d["successes"]),
+            rate,
+            dict(d["failures"]),
+        )
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-serialisable fields."""
         return {

@@ -62,11 +62,12 @@ import rerun.blueprint as rrb
 
 from pickplace.errors import InvalidInputError, OutputError, RecordingError
 from pickplace.outfile import OutputFile
+from pickplace.record.rrd_file import commit_bytes
 from pickplace.sim.loader import load_scene
 from pickplace.sim.vary import ParameterDraw, VaryPlan, VarySpec
 from pickplace.sweep.bins import BinStat, success_by_parameter
-from pickplace.sweep.report import METRICS, Metric, metric_summary, outcome_of, sweep_title
-from pickplace.sweep.stats import RateInterval, success_rate
+from pickplace.sweep.report import METRICS, Metric, outcome_of, sweep_title
+from pickplace.sweep.stats import RateInterval
 from pickplace.world.scene import BinGeometry, Scene
 
 if TYPE_CHECKING:
@@ -420,41 +421,35 @@ def _fmt(value: float | None, scale: float) -> str:
 
 
 def _outcome_markdown(
-    trials: Sequence[Mapping[str, Any]],
-    title: str,
-    plan: VaryPlan | None,
-    by_parameter: Mapping[str, Sequence[BinStat]] | None,
-    rerun: Mapping[str, str | None],
-    level: str = "#",
+    r: Mapping[str, Any], title: str, units: Mapping[str, str], level: str = "#"
 ) -> list[str]:
-    """Headline, failures with seeds and re-run commands, metrics, bins: markdown lines."""
-    rate = success_rate([bool(t["success"]) for t in trials])
-    lines = [
-        f"{level} {title}: {rate.successes} of {rate.trials} succeeded",
-        "",
-        f"**Success rate {100 * rate.rate:.1f} %** (95 % Wilson interval "
-        f"{100 * rate.low:.1f}–{100 * rate.high:.1f} %).",
-        "",
-    ]
-    failed: dict[str, list[Mapping[str, Any]]] = {}
-    for t in trials:
-        if not t["success"]:
-            failed.setdefault(outcome_of(t), []).append(t)
+    """Headline, failures with seeds and re-run commands, metrics, bins of one outcome dict of
+    the report (the whole sweep's, or one arm's: :func:`pickplace.sweep.report.outcome_report`),
+    as markdown lines: the same numbers the text report prints."""
+    lines = [f"{level} {title}: {r['successes']} of {r['completed']} succeeded", ""]
+    interval = r["success_interval"]
+    if interval is not None:
+        lines += [
+            f"**Success rate {100 * interval['rate']:.1f} %** (95 % Wilson interval "
+            f"{100 * interval['low']:.1f}–{100 * interval['high']:.1f} %).",
+            "",
+        ]
     sub = level + "#"
-    if failed:
+    failures = sorted(r["failures"].items(), key=lambda kv: -kv[1]["count"])
+    if failures:
         lines += [f"{sub} Failures", "", "| reason | trials | seeds |", "|---|---:|---|"]
-        for reason, group in sorted(failed.items(), key=lambda kv: -len(kv[1])):
-            seeds = sorted(int(t["seed"]) for t in group)
+        for reason, f in failures:
+            seeds = f["seeds"]
             shown = " ".join(map(str, seeds[:20])) + (" …" if len(seeds) > 20 else "")
-            lines.append(f"| {reason} | {len(seeds)} | {shown} |")
+            lines.append(f"| {reason} | {f['count']} | {shown} |")
         lines.append("")
-        for reason, group in sorted(failed.items(), key=lambda kv: -len(kv[1])):
-            first = min(group, key=lambda t: int(t["seed"]))
-            text = first.get("failure_text") or first.get("detail")
-            command = rerun.get(reason)
-            lines.append(f"- **{reason}**, seed {first['seed']}" + (f": {text}" if text else ""))
-            if command:
-                lines.append(f"  re-run it alone: `{command}`")
+        for reason, f in failures:
+            text = f.get("example")
+            lines.append(
+                f"- **{reason}**, seed {f['example_seed']}" + (f": {text}" if text else "")
+            )
+            if f.get("rerun"):
+                lines.append(f"  re-run it alone: `{f['rerun']}`")
         lines.append("")
     lines += [
         f"{sub} Metrics",
@@ -463,9 +458,9 @@ def _outcome_markdown(
         "|---|---:|---:|---:|---:|",
     ]
     for m in METRICS:
-        if not any(m.key in t for t in trials):
+        p = r["metrics"].get(m.key)
+        if not p or not p["count"]:
             continue
-        p = metric_summary(trials, m)
         tail, worst = ("p5", "min") if m.low_is_worse else ("p95", "max")
         name = f"{m.label} [{m.unit}]" if m.unit else m.label
         note = " (successes)" if m.successes_only else ""
@@ -479,15 +474,15 @@ def _outcome_markdown(
         "min where low is worse (σ).",
         "",
     ]
-    for name, stats in (by_parameter or {}).items():
-        unit = plan.spec(name).parameter.unit if plan is not None else ""
+    for name, stats in r["by_parameter"].items():
+        unit = units.get(name, "")
         lines += [
             f"{sub} Success rate by {name}" + (f" [{unit}]" if unit and unit != "-" else ""),
             "",
             "| bin | trials | succeeded | rate | 95 % Wilson | failures |",
             "|---|---:|---:|---:|---|---|",
         ]
-        for st in stats:
+        for st in map(BinStat.from_dict, stats):
             if st.rate is None:
                 lines.append(f"| {st.label} | 0 | 0 | – | – | |")
                 continue
@@ -500,62 +495,21 @@ def _outcome_markdown(
     return lines
 
 
-def _rerun_commands(
-    report: Mapping[str, Any], trials: Sequence[Mapping[str, Any]], plan: VaryPlan | None
-) -> dict[str, str | None]:
-    """The report's re-run command per failure reason; without one (a report not made by
-    :func:`pickplace.sweep.sweep.sweep_report`), one built from the first failed trial."""
-    out: dict[str, str | None] = {}
-    for reason, f in (report.get("failures") or {}).items():
-        out[reason] = f.get("rerun")
-    vary = "" if plan is None else "".join(f" --vary {s.flag()}" for s in plan.specs)
-    for t in sorted(trials, key=lambda t: int(t["seed"])):
-        reason = outcome_of(t)
-        if t["success"] or reason in out:
-            continue
-        scenario = t.get("scenario") or report.get("scenario", "?")
-        controller = t.get("controller") or report.get("controller", "?")
-        out[reason] = (
-            f"pickplace run --scenario {scenario} --controller {controller} "
-            f"--seed {t['seed']}{vary}"
-        )
-    return out
-
-
-def report_markdown(
-    trials: Sequence[Mapping[str, Any]],
-    report: Mapping[str, Any],
-    plan: VaryPlan | None = None,
-    by_parameter: Mapping[str, Sequence[BinStat]] | None = None,
-) -> str:
-    """The report as markdown: headline, failures with seeds and the command that re-runs
-    each, metrics, bins (per arm and the paired comparison with ``--compare``), then the
-    report dict (without its per-trial list)."""
-    scenario = report.get("scenario", trials[0].get("scenario", "?"))
-    controller = report.get("controller") or trials[0].get("controller", "?")
-    varied = plan.describe() if plan is not None else "nothing varied but the seed"
+def report_markdown(report: Mapping[str, Any]) -> str:
+    """The report (:func:`pickplace.sweep.sweep.sweep_report`) as markdown: headline,
+    failures with seeds and the command that re-runs each, metrics, bins (per arm and the
+    paired comparison with ``--compare``), then the report dict (without its per-trial
+    list). Rendered from the report's numbers, as the text report is
+    (:func:`pickplace.sweep.report.report_text`)."""
+    units = {p["name"]: p["unit"] for p in report["vary"]["parameters"]}
+    varied = report.get("vary_text") or "nothing varied but the seed"
     compare = report.get("compare")
-    title = sweep_title(
-        {
-            "scenario": scenario,
-            "robot": report.get("robot"),
-            "controller": controller if compare is None else report.get("controller"),
-            "compare": compare,
-            "compare_flag": report.get("compare_flag"),
-        }
-    )
-    lines: list[str] = []
+    title = sweep_title(report)
     if compare is None:
-        lines += _outcome_markdown(
-            trials,
-            title,
-            plan,
-            by_parameter,
-            _rerun_commands(report, trials, plan),
-        )
-        lines[4:4] = [f"Varied: {varied}.", ""]
+        lines = _outcome_markdown(report, title, units)
+        lines[2:2] = [f"Varied: {varied}.", ""]
     else:
-        lines += [f"# {title}", "", f"Varied: {varied}.", ""]
+        lines = [f"# {title}", "", f"Varied: {varied}.", ""]
         for p in compare.get("paired", []):
             lines += [
                 f"**{p['a']} − {p['b']}: {100 * p['difference']:+.1f} points** on "
@@ -566,16 +520,8 @@ def report_markdown(
                 "",
             ]
         for label, arm in compare["arms"].items():
-            group = [t for t in trials if t.get("arm") == label]
-            if not group:
-                continue
-            bins = (
-                success_by_parameter(plan, [plan.draw(int(t["seed"])) for t in group], group)
-                if plan is not None and plan.specs
-                else {}
-            )
-            rerun = {k: f.get("rerun") for k, f in arm["failures"].items()}
-            lines += _outcome_markdown(group, label, plan, bins, rerun, level="##")
+            if arm["completed"]:
+                lines += _outcome_markdown(arm, label, units, level="##")
     shown = {k: v for k, v in report.items() if k != "trial_results"}
     lines += ["## Report", "", "```json", json.dumps(shown, indent=2, default=str), "```", ""]
     return "\n".join(lines)
@@ -678,7 +624,8 @@ def log_sweep(
         plan: The varied parameters, if any.
         draws: One draw per seed (matched by seed); needed when ``plan`` varies something.
         scene: Scene whose source bin is drawn; default :func:`~pickplace.sim.loader.load_scene`.
-        bins: Bins per uniform parameter (default: see :func:`pickplace.sim.vary.success_by_bin`).
+        bins: Bins per uniform parameter; default: the report's
+        (:func:`~pickplace.sweep.bins.success_by_bin`).
 
     Returns:
         The success rate per bin of each varied parameter, as plotted (over every trial).
@@ -691,9 +638,19 @@ def log_sweep(
     scene = scene or load_scene()
     by_seed = {d.seed: d for d in draws}
     varied = plan is not None and bool(plan.specs)
-    by_parameter = (
-        success_by_parameter(plan, draws, trials, bins) if plan is not None and varied else {}
-    )
+
+    def bins_of(outcome: Mapping[str, Any] | None, group: Sequence[Mapping[str, Any]]) -> Any:
+        """The report's bins of an outcome (the sweep's or an arm's); counted here from the
+        draws only when another bin count is asked for, or the report has no bins."""
+        if bins is None and outcome is not None and outcome.get("by_parameter"):
+            return {
+                k: [BinStat.from_dict(b) for b in v] for k, v in outcome["by_parameter"].items()
+            }
+        assert plan is not None
+        return success_by_parameter(plan, draws, group, bins)
+
+    by_parameter = bins_of(report, trials) if varied else {}
+    arm_outcomes = (report.get("compare") or {}).get("arms", {})
     colors = outcome_colors([outcome_of(t) for t in trials])
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     _log_bin(rec, scene.source_bin, scene.robot.p_W_base)
@@ -709,11 +666,11 @@ def log_sweep(
         ordered = sorted(counts.items(), key=lambda kv: (kv[0] != "success", -kv[1], kv[0]))
         legend += [(f"{arm}: " * bool(arm) + f"{o} ({c})", colors[o]) for o, c in ordered]
         if plan is not None and varied:
-            stats = by_parameter if not arm else success_by_parameter(plan, draws, group, bins)
+            stats = by_parameter if not arm else bins_of(arm_outcomes.get(arm), group)
             for spec in plan.specs:
                 _log_bins(rec, spec, stats[spec.name], chart_path(spec.name, arm))
     _log_legend(rec, scene.source_bin, legend)
-    text = report_markdown(trials, report, plan, by_parameter)
+    text = report_markdown(report)
     rec.log("report", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
     return by_parameter
 
@@ -761,44 +718,15 @@ def encode_sweep(
     return bytes(data or b"")
 
 
-def _check_complete(path: Path) -> None:
-    """Raise OutputError unless the ``.rrd`` at ``path`` reads back with its report."""
-    from rerun.chunk import RrdReader
-
-    try:
-        entities = RrdReader(path).store().schema().entity_paths()
-    except (RuntimeError, OSError, ValueError) as exc:
-        raise OutputError(
-            f"the sweep recording does not read back ({' '.join(str(exc).split())[:200]})"
-        ) from None
-    if "/report" not in entities:
-        raise OutputError("the sweep recording lacks its report")
-
-
 def commit_recording(output: OutputFile, data: bytes) -> Path:
-    """Write ``data`` to ``output``'s temporary file, check that it reads back complete and
-    put it in place (an older file at the path is replaced only then).
+    """Write the encoded sweep recording ``data`` to ``output`` once it reads back with its
+    report (:func:`~pickplace.record.rrd_file.commit_bytes`).
 
     Raises:
-        OutputError: The file could not be written or is incomplete (the temporary file is
-            deleted, an older file at the path is unchanged).
+        OutputError: The file could not be written or is incomplete (an older file at the
+            path is unchanged).
     """
-    temp = output.open()
-    try:
-        with open(temp, "wb") as f:
-            f.write(data)
-        _check_complete(temp)
-    except OSError as exc:
-        output.discard()
-        raise OutputError(
-            f"cannot write the sweep recording '{output.path}': {exc.strerror or exc}; "
-            "an older file there is unchanged"
-        ) from None
-    except OutputError as exc:
-        output.discard()
-        raise OutputError(f"cannot write the sweep recording '{output.path}': {exc}") from None
-    output.commit()
-    return output.path
+    return commit_bytes(output, data, "report", "the sweep recording")
 
 
 def write_sweep_recording(
@@ -849,10 +777,9 @@ def record_sweep(output: OutputFile, req: SweepRequest, report: Mapping[str, Any
     if not trials:
         output.discard()
         raise OutputError(f"no trial finished: nothing to record in '{output.path}'")
-    plan = req.vary
-    draws = [plan.draw(s) for s in sorted({int(t["seed"]) for t in trials})] if plan.specs else []
+    scene = load_scene(robot=req.specs()[0].robot)  # composed by the sweep: a cache hit
     try:
-        data = encode_sweep(trials, report, plan, draws)
+        data = encode_sweep(trials, report, req.vary, scene=scene)
     except RecordingError as exc:
         output.discard()
         raise OutputError(str(exc)) from None
