@@ -218,3 +218,18 @@ def transform_points(X_WB: SE3, p_B: npt.ArrayLike) -> FloatArray:
     """Points ``p_B`` (N, 3) given in frame B, expressed in world: R_WB p_B + p_WB [m]."""
     R_WB = X_WB.rotation().as_matrix()
     return np.asarray(np.asarray(p_B) @ R_WB.T + X_WB.translation(), dtype=np.float64)
+
+
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of (..., 3) arrays by components (about half its cost on small stacks)."""
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
+
+
+def rotate_by_quat(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v`` (..., 3) by unit quaternions ``quat`` (..., 4, wxyz)."""
+    w = quat[..., :1]
+    u = quat[..., 1:]
+    t = 2.0 * cross3(u, v)
+    return v + w * t + cross3(u, t)

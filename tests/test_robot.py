@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 
 from pickplace.errors import PickPlaceError, RobotError
-from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, HOME_TOOL_SITE, Composition, load_robot
+from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, load_robot
 from pickplace.robot.description import RobotDescription
+from pickplace.robot.home_ik import HOME_TOOL_SITE
+from pickplace.robot.model import Composition
 from pickplace.robot.physics import (
     GRIPPER_MIN_ARMATURE,
     GRIPPER_MIN_DAMPING,

@@ -14,14 +14,14 @@ the description's gripper fields, the brick and the physics options.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
-from functools import cached_property
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
+from pickplace.geometry import rotate_by_quat
 from pickplace.robot.calibration import (
     GRIPPER_PREFIX,
     CalibrationOptions,
@@ -29,7 +29,9 @@ from pickplace.robot.calibration import (
     calibrate_gripper,
 )
 from pickplace.robot.description import RobotDescription
+from pickplace.robot.home_ik import home_candidates
 from pickplace.robot.mjcf import load_part, parse_world
+from pickplace.robot.model import Composition, Robot
 from pickplace.robot.parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
 from pickplace.robot.physics import set_stiff_pad, unique_name
 from pickplace.robot.registry import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
@@ -43,8 +45,6 @@ TOOL_SITE = "tool"
 HOME_KEY = "home"
 """Keyframe of the composed scene with the home posture and the gripper open."""
 
-HOME_TOOL_SITE = "home_tool"
-"""World site whose pose IK reaches for a home posture when the description gives none."""
 
 BRICK_GEOM = "brick"
 """The world's brick: a box geom on a free body."""
@@ -244,247 +244,6 @@ def compose(
 # --------------------------------------------------------------------------- the result
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of (..., 3) arrays by components (about half its cost on small stacks)."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
-
-
-def _rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v`` (..., 3) by unit quaternions ``quat`` (..., 4, wxyz)."""
-    w = quat[..., :1]
-    u = quat[..., 1:]
-    t = 2.0 * _cross(u, v)
-    return v + w * t + _cross(u, t)
-
-
-@dataclass(frozen=True)
-class Robot:
-    """Everything the pipeline needs about the composed robot, resolved from the model.
-
-    Ids and addresses refer to the composed model. Arm arrays have one entry per arm joint
-    (``n = len(arm_joint_names)``, root to flange).
-
-    Attributes:
-        name: The description's name.
-        description: The description it was built from.
-        arm_joint_names: Arm joints in the scene (prefixed), root to flange.
-        arm_joint_ids: Their joint ids.
-        arm_qpos_adr: Their qpos addresses.
-        arm_dof_adr: Their dof (qvel) addresses.
-        q_min: Lower limits [rad or m]; -inf for continuous (unlimited) joints.
-        q_max: Upper limits; +inf for continuous joints.
-        continuous: True for arm joints without a range (no position limit anywhere: their
-            actuators' control range is unlimited too).
-        v_max: Speed limits [rad/s or m/s] from the description.
-        a_max: Acceleration limits [rad/s² or m/s²] from the description, or None.
-        arm_actuator_ids: The position actuator of each arm joint.
-        q_home: Home posture: the description's, or found by IK (``home_source``).
-        home_source: ``"description"`` or ``"ik"``.
-        home_candidates: The description's home, or every distinct IK home, best joint margin
-            first (``q_home`` is the first; the scene loader may choose another).
-        gripper_actuator_ids: The gripper's actuators (order of command vectors).
-        gripper_joint_ids: The gripper's hinge and slide joints (order of
-            :meth:`qpos_for_width`).
-        gripper_kind: What the gripper is, in words (fingers, joints, actuators, coupling).
-        open_command: Command that opens the gripper fully.
-        closed_command: Command that closes it (full squeeze on an object).
-        open_width: Gap between the pads at the open command [m].
-        closed_width: Gap at the closed command with nothing between the fingers [m].
-        squeeze_force: Squeeze per jaw to judge a grasp against [N]: the description's
-            ``grip_force``, else the measured squeeze.
-        measured_squeeze_force: Mean pad normal force on a brick-sized box, closed [N].
-        gap_on_brick: Pad gap while squeezing a brick-sized box [m].
-        pad_geom_ids: Pad geoms of the +y ("left") and -y ("right") sides of the tool frame.
-        pad_body_ids: Bodies of those pads (same structure).
-        pad_faces_body: Per side, each pad's face point in its body's frame [m], shape (k, 3).
-        pad_force_sensor_ids: Per side, the pad–brick contact sensors (one per pad).
-        pad_force_sensor_adr: Their sensordata addresses.
-        pad_force_slots: Contacts each pad sensor reports.
-        tool_site_name: The calibrated tool site (z approach, y closing axis).
-        tool_site_id: Its id.
-        tool_body_id: Its body (the gripper's root).
-        y_tool_body: The tool's y axis in that body's frame.
-        robot_body_ids: Every body of the arm and gripper.
-        robot_geom_ids: Every collision geom of the arm and gripper.
-        gripper_geom_ids: The gripper's collision geoms.
-        footprint_G: The gripper's collision geoms at the open width as boxes in the tool
-            frame, shape (k, 2, 3) [min corner, max corner] [m].
-        p_W_base: Anchor of the first arm joint at the model's reference posture [m].
-        flange_body_id: The arm body the gripper is mounted on.
-        home_key_id: The ``home`` keyframe.
-        home_width: Gripper gap of the ``home`` keyframe [m].
-        calibration: The gripper calibration (gap map, pads, tool point, footprint).
-        repairs: What composition changed in the files, one line each.
-    """
-
-    name: str
-    description: RobotDescription = field(repr=False)
-    arm_joint_names: tuple[str, ...]
-    arm_joint_ids: np.ndarray
-    arm_qpos_adr: np.ndarray
-    arm_dof_adr: np.ndarray
-    q_min: np.ndarray
-    q_max: np.ndarray
-    continuous: np.ndarray
-    v_max: np.ndarray
-    a_max: np.ndarray | None
-    arm_actuator_ids: np.ndarray
-    q_home: np.ndarray
-    home_source: str
-    home_candidates: tuple[np.ndarray, ...]
-    gripper_actuator_ids: np.ndarray
-    gripper_joint_ids: np.ndarray
-    gripper_kind: str
-    open_command: np.ndarray
-    closed_command: np.ndarray
-    open_width: float
-    closed_width: float
-    squeeze_force: float
-    measured_squeeze_force: float
-    gap_on_brick: float
-    pad_geom_ids: tuple[np.ndarray, np.ndarray]
-    pad_body_ids: tuple[np.ndarray, np.ndarray]
-    pad_faces_body: tuple[np.ndarray, np.ndarray]
-    pad_force_sensor_ids: tuple[np.ndarray, np.ndarray]
-    pad_force_sensor_adr: tuple[np.ndarray, np.ndarray]
-    pad_force_slots: int
-    tool_site_name: str
-    tool_site_id: int
-    tool_body_id: int
-    y_tool_body: np.ndarray
-    robot_body_ids: np.ndarray
-    robot_geom_ids: np.ndarray
-    gripper_geom_ids: np.ndarray
-    footprint_G: np.ndarray
-    p_W_base: np.ndarray
-    flange_body_id: int
-    home_key_id: int
-    home_width: float
-    calibration: GripperCalibration = field(repr=False)
-    repairs: tuple[str, ...] = ()
-
-    @property
-    def n_joints(self) -> int:
-        """Number of arm joints."""
-        return len(self.arm_joint_names)
-
-    def write_home(self, model: mujoco.MjModel, q_home: np.ndarray, width: float) -> None:
-        """Write the home posture ``q_home`` [rad] and the gripper at gap ``width`` [m] into
-        ``model``'s ``home`` keyframe (positions and the commands that hold them; the rest of
-        the keyframe is ``qpos0`` and no command). The one writer of the keyframe: the
-        composition, the scene and the loader's home choice all call it."""
-        key = self.home_key_id
-        model.key_qpos[key, self.arm_qpos_adr] = q_home
-        model.key_qpos[key, model.jnt_qposadr[self.gripper_joint_ids]] = self.qpos_for_width(width)
-        model.key_ctrl[key, self.arm_actuator_ids] = q_home
-        model.key_ctrl[key, self.gripper_actuator_ids] = self.ctrl_for_width(width)
-
-    def ctrl_for_width(self, width: float) -> np.ndarray:
-        """Gripper command that holds the free fingers at gap ``width`` [m].
-
-        At or below ``closed_width`` it is the closed command (full squeeze on an object).
-        """
-        return self.calibration.ctrl_for_width(width)
-
-    def ctrl_for_widths(self, widths: np.ndarray) -> np.ndarray:
-        """:meth:`ctrl_for_width` of every entry of ``widths`` (k,) [m], shape (k, actuators)."""
-        cal = self.calibration
-        s = np.clip(np.interp(widths, cal.sweep_gap, cal.sweep_fraction), 0.0, 1.0)
-        return cal.closed_command + s[:, None] * (cal.open_command - cal.closed_command)
-
-    def qpos_for_width(self, width: float) -> np.ndarray:
-        """Positions of the gripper joints (:attr:`gripper_joint_ids`) of the free fingers at
-        gap ``width`` [m] (clipped to the calibrated range): what a kinematic copy sets."""
-        return self.calibration.qpos_for_width(width)
-
-    def gap_from_body_poses(
-        self, body_pos: np.ndarray, body_quat: np.ndarray, y_W: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Pad gap [m] from body poses, vectorised over leading axes.
-
-        Args:
-            body_pos: Body positions in world, shape (..., nbody, 3) (``data.xpos``).
-            body_quat: Body orientations wxyz, shape (..., nbody, 4) (``data.xquat``).
-            y_W: The tool's y axis in world, shape (..., 3), if known (the tool site's rotation
-                matrix's second column); else computed from the tool body's orientation.
-
-        Returns:
-            Shape (...): the innermost +y pad face minus the innermost -y pad face, along the
-            tool's y axis.
-        """
-        if y_W is None:
-            y_W = _rotate(body_quat[..., self.tool_body_id, :], self.y_tool_body)
-        bodies = np.concatenate(self.pad_body_ids)
-        faces = np.concatenate(self.pad_faces_body)
-        p = body_pos[..., bodies, :] + _rotate(body_quat[..., bodies, :], faces)  # both sides
-        along = np.einsum("...ki,...i->...k", p, y_W)
-        k = len(self.pad_body_ids[0])
-        return along[..., :k].min(axis=-1) - along[..., k:].max(axis=-1)
-
-    def gap(self, data: mujoco.MjData) -> float:
-        """Current pad gap [m]."""
-        return float(self.gap_from_body_poses(data.xpos, data.xquat))
-
-    def pad_normal_forces(self, sensordata: np.ndarray) -> np.ndarray:
-        """Normal force [N] of the brick on the +y and -y pads, shape (..., 2), from
-        sensordata of shape (..., nsensordata)."""
-        n = 4 * self.pad_force_slots
-        out = []
-        for adrs in self.pad_force_sensor_adr:
-            total = 0.0
-            for a in adrs:
-                rows = sensordata[..., a : a + n].reshape(*sensordata.shape[:-1], -1, 4)
-                total = total + rows[..., 1].sum(axis=-1)
-            out.append(total)
-        return np.stack(out, axis=-1)
-
-    def make_data(self, model: mujoco.MjModel) -> mujoco.MjData:
-        """Fresh MjData of ``model`` reset to the home keyframe."""
-        data = mujoco.MjData(model)
-        mujoco.mj_resetDataKeyframe(model, data, self.home_key_id)
-        mujoco.mj_forward(model, data)
-        return data
-
-
-@dataclass(frozen=True)
-class Composition:
-    """A composed scene: its spec (for derived models), the compiled model, the robot."""
-
-    spec: mujoco.MjSpec
-    model: mujoco.MjModel
-    robot: Robot
-
-    @cached_property
-    def arm_model(self) -> mujoco.MjModel:
-        """The scene compiled with only the arm joints left (nq = nv = n), for the IK.
-
-        Gripper joints, the brick's free joint and everything that refers to joints
-        (actuators, tendons, equalities, sensors, keyframes) are removed; bodies, sites and
-        geometry are unchanged, so the tool site's forward kinematics equal the simulation's.
-        """
-        spec = self.spec.copy()
-        for collection in ("actuators", "tendons", "equalities", "sensors", "keys", "pairs"):
-            for element in list(getattr(spec, collection)):
-                spec.delete(element)
-        for element in list(spec.excludes):
-            spec.delete(element)
-        keep = set(self.robot.arm_joint_names)
-        for joint in list(spec.joints):
-            if joint.name not in keep:
-                spec.delete(joint)
-        model = spec.compile()
-        order = tuple(
-            mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(model.njnt)
-        )
-        if order != self.robot.arm_joint_names:
-            raise RobotError(
-                f"arm joints {order} are not in the order {self.robot.arm_joint_names}"
-            )
-        return model
-
-
 def _ids(model: mujoco.MjModel, obj: mujoco.mjtObj, names: tuple[str, ...]) -> np.ndarray:
     out = []
     for n in names:
@@ -493,91 +252,6 @@ def _ids(model: mujoco.MjModel, obj: mujoco.mjtObj, names: tuple[str, ...]) -> n
             raise RobotError(f"composed scene lacks '{n}'")
         out.append(i)
     return np.array(out, dtype=int)
-
-
-_IK_DAMPING = 1e-3
-_IK_MAX_STEP = 0.3  # [rad] per iteration
-_IK_ITERATIONS = 100
-HOME_SEEDS = 8
-"""Seeds of the IK that finds home candidates when a description gives no home."""
-HOME_DISTINCT = 1e-3
-"""Home candidates closer than this in every joint [rad] are the same posture."""
-
-
-def _home_candidates(
-    model: mujoco.MjModel,
-    joint_ids: np.ndarray,
-    site: int,
-    q_min: np.ndarray,
-    q_max: np.ndarray,
-    src: str,
-) -> list[np.ndarray]:
-    """Arm postures that put the tool site on the world's ``home_tool`` site, best first.
-
-    Damped least squares (λ = 1e-3, steps of at most 0.3 rad, 100 iterations) on position and
-    orientation from :data:`HOME_SEEDS` deterministic seeds — the middle of each joint's range
-    (0 for continuous joints; a zero seed fails where 0 is outside a range), then uniform draws
-    over the middle half of the ranges — clamped to the limits each step. The seeds that reach
-    the pose within 0.1 mm and 1 mrad give the candidates (postures within
-    :data:`HOME_DISTINCT` of each other count once), ordered by their distance from the nearest
-    joint limit relative to the range (continuous joints count ±π), largest first. Margin alone
-    does not make a good home (``../shared/notes/robot-models.md``): the scene loader
-    (:mod:`pickplace.sim.loader`) chooses among them by the pre-flight of the nominal plan.
-    """
-    target = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, HOME_TOOL_SITE)
-    if target < 0:
-        raise RobotError(
-            f"{src}: [arm] home: not given, and the world has no '{HOME_TOOL_SITE}' site to find "
-            f"one by IK; valid: set home = [...] (one value per arm joint)"
-        )
-    data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    p_goal = data.site_xpos[target].copy()
-    q_goal = np.zeros(4)
-    mujoco.mju_mat2Quat(q_goal, data.site_xmat[target])
-    qadr, dadr = model.jnt_qposadr[joint_ids], model.jnt_dofadr[joint_ids]
-    lo = np.where(np.isfinite(q_min), q_min, -np.pi)
-    hi = np.where(np.isfinite(q_max), q_max, np.pi)
-    mid = np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0)
-    rng = np.random.default_rng(0)
-    seeds = [mid] + [
-        mid + rng.uniform(-0.25, 0.25, mid.shape) * (hi - lo) for _ in range(HOME_SEEDS - 1)
-    ]
-    jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
-    eye = np.eye(6)
-    found: list[tuple[float, np.ndarray]] = []
-    for seed in seeds:
-        q = seed.copy()
-        for _ in range(_IK_ITERATIONS):
-            data.qpos[qadr] = q
-            mujoco.mj_kinematics(model, data)
-            mujoco.mj_comPos(model, data)
-            quat = np.zeros(4)
-            mujoco.mju_mat2Quat(quat, data.site_xmat[site])
-            e_rot_local = np.zeros(3)
-            mujoco.mju_subQuat(e_rot_local, q_goal, quat)
-            e = np.concatenate(
-                [p_goal - data.site_xpos[site], data.site_xmat[site].reshape(3, 3) @ e_rot_local]
-            )
-            if np.linalg.norm(e[:3]) < 1e-4 and np.linalg.norm(e[3:]) < 1e-3:
-                if all(np.max(np.abs(q - other)) > HOME_DISTINCT for _, other in found):
-                    margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
-                    found.append((margin, q.copy()))
-                break
-            mujoco.mj_jacSite(model, data, jacp, jacr, site)
-            J = np.vstack([jacp[:, dadr], jacr[:, dadr]])
-            dq = J.T @ np.linalg.solve(J @ J.T + _IK_DAMPING**2 * eye, e)
-            step = float(np.max(np.abs(dq)))
-            if step > _IK_MAX_STEP:
-                dq *= _IK_MAX_STEP / step
-            q = np.clip(q + dq, q_min, q_max)
-    if not found:
-        raise RobotError(
-            f"{src}: [arm] home: not given, and IK found no posture that puts the tool on the "
-            f"world's '{HOME_TOOL_SITE}' pose; valid: set home = [...] (one value per arm joint)"
-        )
-    found.sort(key=lambda item: -item[0])
-    return [q for _, q in found]
 
 
 def _gripper_kind(model: mujoco.MjModel, joints: np.ndarray, gripper: PreparedGripper) -> str:
@@ -644,7 +318,7 @@ def load_robot(
         candidates = [np.array(desc.arm.home, dtype=float)]
         home_source = "description"
     else:
-        candidates = _home_candidates(model, joint_ids, tool_site, q_min, q_max, src)
+        candidates = home_candidates(model, joint_ids, tool_site, q_min, q_max, src)
         home_source = "ik"
     q_home = candidates[0]
 
@@ -665,11 +339,11 @@ def load_robot(
     pad_bodies = tuple(model.geom_bodyid[g].copy() for g in pad_geoms)
     faces_body = []
     for geoms, faces in zip(pad_geoms, calib.pad_faces, strict=True):
-        rotated = _rotate(model.geom_quat[geoms], faces)
+        rotated = rotate_by_quat(model.geom_quat[geoms], faces)
         faces_body.append(model.geom_pos[geoms] + rotated)
     sensors = tuple(_ids(model, obj.mjOBJ_SENSOR, names) for names in composed.pad_sensors)
     tool_body = int(model.site_bodyid[tool_site])
-    y_tool = _rotate(model.site_quat[tool_site], np.array([0.0, 1.0, 0.0]))
+    y_tool = rotate_by_quat(model.site_quat[tool_site], np.array([0.0, 1.0, 0.0]))
     body_names = [mujoco.mj_id2name(model, obj.mjOBJ_BODY, b) or "" for b in range(model.nbody)]
     robot_bodies = np.array(
         [b for b, n in enumerate(body_names) if n.startswith((ARM_PREFIX, GRIPPER_PREFIX))]

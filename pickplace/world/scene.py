@@ -22,8 +22,8 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.errors import SceneError, UnknownNameError
-from pickplace.robot.compose import Composition, Robot
 from pickplace.robot.mjcf import parse_world
+from pickplace.robot.model import Composition, Robot
 from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from pickplace.robot.registry import DEFAULT_WORLD
 
@@ -94,7 +94,7 @@ class WorldNames:
     """Names a world file must define (defaults: ``scenes/world.xml``).
 
     The world also carries a site ``home_tool`` where a robot without a home posture is sent
-    by IK (:data:`pickplace.robot.compose.HOME_TOOL_SITE`), and, for the ``fault-obstacle``
+    by IK (:data:`pickplace.robot.home_ik.HOME_TOOL_SITE`), and, for the ``fault-obstacle``
     scenario,
     a mocap body ``obstacle`` (:class:`pickplace.sim.faults.Obstacle`).
 

@@ -1,0 +1,106 @@
+"""Home postures by IK when a description gives none: damped least squares from several seeds
+to the world's ``home_tool`` site, distinct solutions best joint margin first (the loader
+chooses among them by planning, :mod:`pickplace.planning.home`)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from pickplace.errors import RobotError
+
+_IK_DAMPING = 1e-3
+
+
+_IK_MAX_STEP = 0.3  # [rad] per iteration
+
+
+_IK_ITERATIONS = 100
+
+
+HOME_SEEDS = 8
+"""Seeds of the IK that finds home candidates when a description gives no home."""
+
+
+HOME_DISTINCT = 1e-3
+"""Home candidates closer than this in every joint [rad] are the same posture."""
+
+
+def home_candidates(
+    model: mujoco.MjModel,
+    joint_ids: np.ndarray,
+    site: int,
+    q_min: np.ndarray,
+    q_max: np.ndarray,
+    src: str,
+) -> list[np.ndarray]:
+    """Arm postures that put the tool site on the world's ``home_tool`` site, best first.
+
+    Damped least squares (λ = 1e-3, steps of at most 0.3 rad, 100 iterations) on position and
+    orientation from :data:`HOME_SEEDS` deterministic seeds — the middle of each joint's range
+    (0 for continuous joints; a zero seed fails where 0 is outside a range), then uniform draws
+    over the middle half of the ranges — clamped to the limits each step. The seeds that reach
+    the pose within 0.1 mm and 1 mrad give the candidates (postures within
+    :data:`HOME_DISTINCT` of each other count once), ordered by their distance from the nearest
+    joint limit relative to the range (continuous joints count ±π), largest first. Margin alone
+    does not make a good home (``../shared/notes/robot-models.md``): the scene loader
+    (:mod:`pickplace.sim.loader`) chooses among them by the pre-flight of the nominal plan.
+    """
+    target = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, HOME_TOOL_SITE)
+    if target < 0:
+        raise RobotError(
+            f"{src}: [arm] home: not given, and the world has no '{HOME_TOOL_SITE}' site to find "
+            f"one by IK; valid: set home = [...] (one value per arm joint)"
+        )
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    p_goal = data.site_xpos[target].copy()
+    q_goal = np.zeros(4)
+    mujoco.mju_mat2Quat(q_goal, data.site_xmat[target])
+    qadr, dadr = model.jnt_qposadr[joint_ids], model.jnt_dofadr[joint_ids]
+    lo = np.where(np.isfinite(q_min), q_min, -np.pi)
+    hi = np.where(np.isfinite(q_max), q_max, np.pi)
+    mid = np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0)
+    rng = np.random.default_rng(0)
+    seeds = [mid] + [
+        mid + rng.uniform(-0.25, 0.25, mid.shape) * (hi - lo) for _ in range(HOME_SEEDS - 1)
+    ]
+    jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+    eye = np.eye(6)
+    found: list[tuple[float, np.ndarray]] = []
+    for seed in seeds:
+        q = seed.copy()
+        for _ in range(_IK_ITERATIONS):
+            data.qpos[qadr] = q
+            mujoco.mj_kinematics(model, data)
+            mujoco.mj_comPos(model, data)
+            quat = np.zeros(4)
+            mujoco.mju_mat2Quat(quat, data.site_xmat[site])
+            e_rot_local = np.zeros(3)
+            mujoco.mju_subQuat(e_rot_local, q_goal, quat)
+            e = np.concatenate(
+                [p_goal - data.site_xpos[site], data.site_xmat[site].reshape(3, 3) @ e_rot_local]
+            )
+            if np.linalg.norm(e[:3]) < 1e-4 and np.linalg.norm(e[3:]) < 1e-3:
+                if all(np.max(np.abs(q - other)) > HOME_DISTINCT for _, other in found):
+                    margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
+                    found.append((margin, q.copy()))
+                break
+            mujoco.mj_jacSite(model, data, jacp, jacr, site)
+            J = np.vstack([jacp[:, dadr], jacr[:, dadr]])
+            dq = J.T @ np.linalg.solve(J @ J.T + _IK_DAMPING**2 * eye, e)
+            step = float(np.max(np.abs(dq)))
+            if step > _IK_MAX_STEP:
+                dq *= _IK_MAX_STEP / step
+            q = np.clip(q + dq, q_min, q_max)
+    if not found:
+        raise RobotError(
+            f"{src}: [arm] home: not given, and IK found no posture that puts the tool on the "
+            f"world's '{HOME_TOOL_SITE}' pose; valid: set home = [...] (one value per arm joint)"
+        )
+    found.sort(key=lambda item: -item[0])
+    return [q for _, q in found]
+
+
+HOME_TOOL_SITE = "home_tool"
+"""World site whose pose IK reaches for a home posture when the description gives none."""
