@@ -222,3 +222,20 @@ def test_a_sweep_composes_its_robot_once_per_process(monkeypatch: pytest.MonkeyP
     report = run_sweep(SweepRequest("pick-place", "qp", 3, 0, 1, robot="panda-hand"))
     assert report["successes"] == 3
     assert len(calls) == 1
+
+
+def test_a_world_file_read_again_is_parsed_again_only_once_it_changed(tmp_path: Path) -> None:
+    """read_world remembers a file's parse by its modification time and size: asked again,
+    the same WorldFile; once the file changes, a new parse of the new content."""
+    from pickplace.robot.registry import DEFAULT_WORLD
+    from pickplace.world.scene import read_world
+
+    path = tmp_path / "world.xml"
+    text = DEFAULT_WORLD.read_text()
+    path.write_text(text)
+    first = read_world(path)
+    assert read_world(path) is first
+    # another size as well: two writes within the file system's clock tick share an mtime
+    path.write_text(text.replace('timestep="0.002"', 'timestep="0.0010"'))
+    changed = read_world(path)
+    assert changed is not first and changed.timestep == 0.001

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from pickplace.errors import RobotError
+from pickplace.robot.mjcf import file_stamps
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -228,6 +229,9 @@ class GripperDescription:
     couple_fingers: bool = True
 
 
+_DESCRIPTIONS: dict[Path, tuple[tuple[tuple[str, int, int], ...], RobotDescription]] = {}
+
+
 @dataclass(frozen=True)
 class RobotDescription:
     """A robot: an arm, a gripper on its flange, and the data no MJCF file carries.
@@ -253,6 +257,17 @@ class RobotDescription:
                 one line naming the file, the field and what would be valid.
         """
         source = Path(path).resolve()
+        stamps = file_stamps([source])
+        known = _DESCRIPTIONS.get(source)
+        if known is not None and stamps is not None and known[0] == stamps:
+            return known[1]  # unchanged since it was read (a description is immutable)
+        desc = cls._read(source)
+        if stamps is not None:
+            _DESCRIPTIONS[source] = (stamps, desc)
+        return desc
+
+    @classmethod
+    def _read(cls, source: Path) -> RobotDescription:
         if not source.is_file():
             raise RobotError(
                 f"{source}: robot description does not exist; valid: a TOML file with "

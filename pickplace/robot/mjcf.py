@@ -336,8 +336,10 @@ _Stamp = tuple[str, int, int]  # path, mtime [ns], size [bytes]
 _PART_DIGESTS: dict[tuple[Path, str, str | None, Path], tuple[tuple[_Stamp, ...], str]] = {}
 
 
-def _stamps(files: list[Path]) -> tuple[_Stamp, ...] | None:
-    """Each file's modification time and size, or None if one cannot be read."""
+def file_stamps(files: list[Path]) -> tuple[_Stamp, ...] | None:
+    """Each file's path, modification time [ns] and size [bytes], or None if one cannot be
+    read: what a per-process cache of a file's parse is keyed by, so that a file asked for
+    again is stat'ed, not read again (and read again once it changed)."""
     out = []
     for f in files:
         try:
@@ -361,10 +363,10 @@ def part_digest(path: Path, field: str, angle: str | None, source: Path | None =
     path = path.resolve()
     key = (path, field, angle, source or path)
     known = _PART_DIGESTS.get(key)
-    if known is not None and _stamps([Path(f) for f, _, _ in known[0]]) == known[0]:
+    if known is not None and file_stamps([Path(f) for f, _, _ in known[0]]) == known[0]:
         return known[1]
     _, files, used_angle, _ = _sanitised_tree(path, field, angle, source or path)
-    stamps = _stamps(files)
+    stamps = file_stamps(files)
     digest = _digest(used_angle, files)
     if stamps is not None:
         _PART_DIGESTS[key] = (stamps, digest)

@@ -22,7 +22,7 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.errors import SceneError, UnknownNameError
-from pickplace.robot.mjcf import parse_world
+from pickplace.robot.mjcf import file_stamps, parse_world
 from pickplace.robot.model import Composition, Robot
 from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from pickplace.robot.registry import DEFAULT_WORLD
@@ -348,19 +348,30 @@ class WorldFile:
         return float(self.spec.option.timestep)
 
 
+_WORLDS: dict[Path, tuple[tuple[tuple[str, int, int], ...], WorldFile]] = {}
+
+
 def read_world(path: str | Path | None = None) -> WorldFile:
-    """Read and parse a world file (default ``scenes/world.xml``).
+    """Read and parse a world file (default ``scenes/world.xml``), once per process while
+    its modification time and size stay the same.
 
     Raises:
         SceneError: The file is missing, not a file or not valid MJCF.
     """
     resolved = (Path(path) if path is not None else DEFAULT_WORLD).resolve()
+    stamps = file_stamps([resolved])
+    known = _WORLDS.get(resolved)
+    if known is not None and stamps is not None and known[0] == stamps:
+        return known[1]  # unchanged since it was read: its spec is never changed
     spec = parse_world(resolved)
     try:
         content = resolved.read_bytes()
     except OSError as exc:
         raise SceneError(f"scene file '{resolved}' cannot be read: {exc.strerror}") from exc
-    return WorldFile(resolved, content, spec)
+    world = WorldFile(resolved, content, spec)
+    if stamps is not None:
+        _WORLDS[resolved] = (stamps, world)
+    return world
 
 
 def _world_contact_bodies(model: mujoco.MjModel, robot: np.ndarray, brick_body: int) -> list[int]:
