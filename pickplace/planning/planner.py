@@ -15,7 +15,7 @@ taking the first that is feasible:
 4. "across the length, turned 180°".
 
 Every candidate's clearance via-point turns with the base swing (``via="swing"``, see
-:func:`pickplace.planning.plan.plan_pick_place`). Measured on bin 1 (``planning-failures.md``): the
+:func:`pickplace.planning.plan.plan_pick_place`). Measured on bin 1 (``docs/physics-notes.md``): the
 180° twin rescues only wrist cases, the 90° grasp every wall case; the swing via-point every
 wrist case. If none is feasible the report says so, with each candidate's first problem.
 
