@@ -6,8 +6,8 @@ order,
 taking the first that is feasible:
 
 1. "across the width": the top-down grasp closing across the brick's width whose yaw is
-   nearest the tool's (carried along by the base swing) — the grasp every plan used before
-   candidates existed;
+   nearest the tool's (carried along by the base swing) — the default grasp of
+   :func:`~pickplace.planning.plan.plan_pick_place`;
 2. "across the width, turned 180°": its symmetric twin about the brick's vertical axis;
 3. "across the length": turned 90°, closing across the brick's length, the nearer yaw of the
    two — only when the open fingers clear the brick's length by the pre-flight clearance on
