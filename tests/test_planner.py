@@ -1,4 +1,4 @@
-"""Candidate plans, the choice among them, and what happens when none is feasible (issue 12)."""
+"""Candidate plans, the choice among them, and what happens when none is feasible."""
 
 from __future__ import annotations
 
