@@ -1,20 +1,19 @@
 """Benchmark: where a run's time goes, as ratios and medians measured in one process and one run.
 
 Targets (figures, not tests):
-- qp IK tick <= 0.5x mink.solve_ik on the identical problem (issue 7);
-- nominal pick-and-place >= 40x real time headless, >= 30x while recording (issue 7);
-- sweep throughput with all workers >= 1.8x that with 1 worker (2 cores) (issue 7);
+- qp IK tick <= 0.5x mink.solve_ik on the identical problem;
+- nominal pick-and-place >= 40x real time headless, >= 30x while recording;
+- sweep throughput with all workers >= 1.8x that with 1 worker (2 cores);
 - median planning time, all candidates included, <= 25 ms; nominal run >= 55x real time with
-  its planning included (issue 12);
+  its planning included;
 - nominal cycle time <= 1.25x its joint-speed bound (each keyframe segment's largest per-joint
   path length over speed limit, summed, plus the gripper's actions, from the run's own
-  commanded joint path), with success, slip <= 3 mm, speed ratio <= 1, tracking <= 10 mm
-  (issue 13);
-- composing and calibrating each bundled robot, cold (no cache), <= 1 s (issue 14);
+  commanded joint path), with success, slip <= 3 mm, speed ratio <= 1, tracking <= 10 mm;
+- composing and calibrating each bundled robot, cold (no cache), <= 1 s;
 - trials/s per worker of the Ray backend (a local cluster) within 10 % of the process
   backend's on this machine, both in steady state (from the 10th result on); speed-up with 2
   workers >= 1.8; peak RSS of a 2,000-trial sweep (its process and its largest worker) and the
-  bytes a trial's record takes (issue 16).
+  bytes a trial's record takes.
 
 Usage: python scripts/bench.py [--json] [--trials N] [--backend-trials N] [--rss-trials N]
 """

@@ -1,4 +1,4 @@
-"""Every bundled robot, and one of our own, through the whole pipeline (issue 14's acceptance).
+"""Every bundled robot, and one of our own, through the whole pipeline.
 
 Each bundled robot picks and places the brick, succeeds on pick-place-random for at least 49 of
 seeds 0-49 (slow), and follows the singular reach with qp while pinv exceeds a joint speed

@@ -1,4 +1,4 @@
-"""The real CLI in a subprocess: bad input, faults, interruption, output formats (issue 6)."""
+"""The real CLI in a subprocess: bad input, faults, interruption, output formats."""
 
 from __future__ import annotations
 

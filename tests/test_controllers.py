@@ -90,7 +90,8 @@ def test_pinv_and_dls_follow_their_formulas(scene) -> None:
 
 
 def test_near_the_stretched_singularity_pinv_explodes_and_qp_stays_limited(scene) -> None:
-    """Seed 000's lesson at a bent-elbow pose near full stretch (mink notes: ε = 0.01)."""
+    """At a bent-elbow pose near full stretch (ε = 0.01, as measured in docs/physics-notes.md,
+    "mink 1.3 and the controllers"), pinv asks for a huge joint speed and the QP stays limited."""
     eps = 0.01
     q = np.array([0.0, eps, 0.0, 2 * eps, 0.0, eps, 0.0])
     V = np.array([0.0, 0.0, 0.1, 0.0, 0.0, 0.0])  # 0.1 m/s along the stretched arm

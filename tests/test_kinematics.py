@@ -76,7 +76,7 @@ def test_singular_jacobian_has_infinite_condition() -> None:
 
 
 def test_holding_torques_equal_mujocos_generalized_force_of_the_weight(scene) -> None:
-    """Jᵀ statics (seed 001): τ = Jᵥᵀ(−m g) equals −(generalized force of the load's weight)."""
+    """Jᵀ statics: τ = Jᵥᵀ(−m g) equals −(generalized force of the load's weight)."""
     model = scene.model
     data = mujoco.MjData(model)
     rng = np.random.default_rng(3)

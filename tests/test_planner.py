@@ -1,4 +1,4 @@
-"""Candidate plans, the choice among them, and what happens when none is feasible (issue 12)."""
+"""Candidate plans, the choice among them, and what happens when none is feasible."""
 
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def test_a_narrow_gripper_gets_no_length_grasp(scene: Scene) -> None:
 
 def test_near_a_wall_the_length_grasp_is_chosen(scene: Scene) -> None:
     """60 mm from the far wall, closing across the width puts the palm over the wall; closing
-    across the length does not (planning-failures.md, class W)."""
+    across the length does not (docs/physics-notes.md, class W)."""
     X_pick, X_place = _poses(scene, 0.0, -0.09, 0.0)
     report = PickPlacePlanner(scene, "qp").plan(X_pick, X_place)
     assert report.feasible

@@ -1,5 +1,5 @@
 """The kinematic pre-flight against what it claims to predict: the loop's commanded path, MuJoCo's
-distances, and the physics of runs it passes or refuses (issue 12)."""
+distances, and the physics of runs it passes or refuses."""
 
 from __future__ import annotations
 

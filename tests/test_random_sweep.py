@@ -1,4 +1,4 @@
-"""pick-place-random over 300 seeds nobody looked at (issue 12): slow, run by CI."""
+"""pick-place-random over 300 seeds nobody looked at: slow, run by CI."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The table of plots: each declared once, documented in the README, shown in one view."""
+"""The table of plots: each declared once, documented in docs/recordings.md, shown in one view."""
 
 from __future__ import annotations
 
@@ -15,14 +15,14 @@ from pickplace.record.blueprint import LIMIT_LINES, PLOTS, LimitLines, Plot, bui
 from pickplace.sim.ticklog import TickLog
 from pickplace.world.scene import Scene
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+DOC = Path(__file__).resolve().parent.parent / "docs" / "recordings.md"
 TABLE_PATHS = [s.path for s in (*PLOTS, *LIMIT_LINES)]
 
 
-def readme_entity_paths() -> set[str]:
-    """Every entity path named in the first cell of the README's entity table."""
-    text = README.read_text()
-    section = text.split("## Recordings", 1)[1].split("\n## ", 1)[0]
+def documented_entity_paths() -> set[str]:
+    """Every entity path named in the first cell of the entity table of docs/recordings.md."""
+    text = DOC.read_text()
+    section = text.split("## Entity paths", 1)[1].split("\n## ", 1)[0]
     paths: set[str] = set()
     for line in section.splitlines():
         if line.startswith("| `"):
@@ -31,13 +31,13 @@ def readme_entity_paths() -> set[str]:
     return paths
 
 
-def test_every_plot_is_in_the_readme_entity_table_and_vice_versa() -> None:
-    documented = {p for p in readme_entity_paths() if p.startswith("plots/")}
+def test_every_plot_is_in_the_documented_entity_table_and_vice_versa() -> None:
+    documented = {p for p in documented_entity_paths() if p.startswith("plots/")}
     assert documented == set(TABLE_PATHS)
 
 
-def test_the_readme_table_is_found() -> None:
-    paths = readme_entity_paths()
+def test_the_documented_table_is_found() -> None:
+    paths = documented_entity_paths()
     assert {"world", "events", "summary"} <= paths
 
 

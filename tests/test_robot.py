@@ -371,9 +371,9 @@ def test_missing_and_malformed_descriptions(tmp_path: Path) -> None:
     assert issubclass(RobotError, PickPlaceError)
 
 
-def test_the_readme_example_description_is_valid_and_sets_every_field(tmp_path: Path) -> None:
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    section = readme.split("## Your own robot", 1)[1]
+def test_the_documented_example_description_is_valid_and_sets_every_field(tmp_path: Path) -> None:
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "robots.md").read_text()
+    section = doc.split("## Your own robot", 1)[1]
     example = section.split("```toml\n", 1)[1].split("```", 1)[0]
     write_toy_robot(tmp_path, toml=example)
     desc = RobotDescription.from_toml(tmp_path / "robot.toml")

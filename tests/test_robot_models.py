@@ -30,7 +30,7 @@ ROBOTS_DIR = REPO / "robots"
 WORLD = REPO / "scenes" / "world.xml"
 ROBOTS = ("panda-hand", "ur5e-2f85")
 
-# The issue's description format: every key a bundled file may use.
+# The robot.toml format (docs/robots.md): every key a bundled file may use.
 ALLOWED_KEYS = {
     "": {"name", "arm", "gripper"},
     "arm": {"mjcf", "flange", "speed_limits", "accel_limits", "home", "angle"},
@@ -178,7 +178,7 @@ def joint_actuator(model: mujoco.MjModel, joint: int) -> int:
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_description_uses_only_the_issue_format(robot: str) -> None:
+def test_description_uses_only_the_documented_format(robot: str) -> None:
     desc = description(robot)
     assert set(desc) <= ALLOWED_KEYS[""]
     assert {"name", "arm", "gripper"} <= set(desc)

@@ -1,9 +1,8 @@
-"""Where a run meets the outside world (issue 15): viewers, signals, full disks, closed pipes.
+"""Where a run meets the outside world: viewers, signals, full disks, closed pipes.
 
 Every test drives the real CLI in a subprocess and checks the exit code, that stderr has at
 most three lines and no traceback, and that a ``.rrd`` left at the target path is complete
 (``RrdReader(path).store()`` works and holds the summary) or is the older file, untouched.
-The numbers in the section titles are the defects of the issue.
 """
 
 from __future__ import annotations
@@ -207,10 +206,10 @@ def viewer() -> Iterator[Viewer]:
     v.close()
 
 
-# ---------------------------------------------------------------------------- 1, 3: viewers
+# ---------------------------------------------------------------------------------- viewers
 
 
-def test_1_viewer_that_never_answers_fails_in_bounded_time_and_keeps_the_file(
+def test_viewer_that_never_answers_fails_in_bounded_time_and_keeps_the_file(
     tmp_path: Path, silent_server: str
 ) -> None:
     rrd = tmp_path / "a.rrd"
@@ -226,7 +225,7 @@ def test_1_viewer_that_never_answers_fails_in_bounded_time_and_keeps_the_file(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.rrd"]  # no temp or lock left
 
 
-def test_1_ctrl_c_works_while_the_viewer_is_frozen(tmp_path: Path, viewer: Viewer) -> None:
+def test_ctrl_c_works_while_the_viewer_is_frozen(tmp_path: Path, viewer: Viewer) -> None:
     rrd = tmp_path / "frozen.rrd"
     proc = cli(
         "run",
@@ -257,7 +256,7 @@ def test_1_ctrl_c_works_while_the_viewer_is_frozen(tmp_path: Path, viewer: Viewe
 
 
 @pytest.mark.parametrize("how", ["stopped", "killed"])
-def test_3_viewer_that_stops_or_vanishes_mid_run_does_not_end_the_run(
+def test_viewer_that_stops_or_vanishes_mid_run_does_not_end_the_run(
     tmp_path: Path, viewer: Viewer, how: str
 ) -> None:
     rrd = tmp_path / f"{how}.rrd"
@@ -302,7 +301,7 @@ def test_3_viewer_that_stops_or_vanishes_mid_run_does_not_end_the_run(
     assert t_event <= (t_lost + bound + 0.25 + 0.5) * pace + 0.5, (t_event, t_lost)
 
 
-def test_9_nothing_listening_fails_at_once_in_one_uncoloured_line() -> None:
+def test_nothing_listening_fails_at_once_in_one_uncoloured_line() -> None:
     t0 = time.monotonic()
     code, out, err = finish(cli("run", "--connect", f"rerun+http://127.0.0.1:{free_port()}/proxy"))
     assert code == 3
@@ -312,7 +311,7 @@ def test_9_nothing_listening_fails_at_once_in_one_uncoloured_line() -> None:
     assert out == ""
 
 
-def test_9_spawn_without_a_display_fails_at_once() -> None:
+def test_spawn_without_a_display_fails_at_once() -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     port_in_use = viewer_problem(ViewerAddress("", "127.0.0.1", 9876, False), 0.5) is None
     if port_in_use:
@@ -323,7 +322,7 @@ def test_9_spawn_without_a_display_fails_at_once() -> None:
     assert "--spawn needs a display" in line
 
 
-def test_10_rerun_scheme_is_tls_and_says_so(viewer: Viewer) -> None:
+def test_rerun_scheme_is_tls_and_says_so(viewer: Viewer) -> None:
     url = viewer.url.replace("rerun+http://", "rerun://")
     code, _, err = finish(cli("run", "--connect", url))
     assert code == 3
@@ -340,14 +339,14 @@ def test_10_rerun_scheme_is_tls_and_says_so(viewer: Viewer) -> None:
         ("grpc://127.0.0.1:9876/proxy", "the scheme must be one of"),
     ],
 )
-def test_10_malformed_viewer_urls_are_bad_input(url: str, expected: str) -> None:
+def test_malformed_viewer_urls_are_bad_input(url: str, expected: str) -> None:
     code, _, err = finish(cli("run", "--connect", url))
     assert code == 2
     (line,) = clean_stderr(err)
     assert expected in line
 
 
-# ---------------------------------------------------------------------------- 2: the file
+# --------------------------------------------------------------------- the recording file
 
 
 @pytest.mark.parametrize(
@@ -355,7 +354,7 @@ def test_10_malformed_viewer_urls_are_bad_input(url: str, expected: str) -> None
     [["--control-rate", "200"], ["--control-rate", "5"], ["--brick", "9,9,0"], ["--seed", "-1"]],
     ids=lambda a: " ".join(a),
 )
-def test_2_a_refused_run_does_not_touch_an_existing_recording(
+def test_a_refused_run_does_not_touch_an_existing_recording(
     tmp_path: Path, args: list[str]
 ) -> None:
     rrd = tmp_path / "keep.rrd"
@@ -369,7 +368,7 @@ def test_2_a_refused_run_does_not_touch_an_existing_recording(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.rrd"]
 
 
-def test_2_one_writer_per_path(tmp_path: Path) -> None:
+def test_one_writer_per_path(tmp_path: Path) -> None:
     rrd = tmp_path / "shared.rrd"
     first = cli("run", "--record", str(rrd), "--speed", SLOW, "--pace", "1", "--json")
     wait_for_run(first, rrd, 0.0)
@@ -387,7 +386,7 @@ def test_2_one_writer_per_path(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["shared.rrd"]
 
 
-def test_2_a_killed_run_leaves_the_older_file_and_the_next_run_cleans_up(tmp_path: Path) -> None:
+def test_a_killed_run_leaves_the_older_file_and_the_next_run_cleans_up(tmp_path: Path) -> None:
     rrd = tmp_path / "killed.rrd"
     rrd.write_bytes(OLD)
     proc = cli("run", "--record", str(rrd), "--speed", SLOW, "--pace", "4")
@@ -402,7 +401,7 @@ def test_2_a_killed_run_leaves_the_older_file_and_the_next_run_cleans_up(tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["killed.rrd"]
 
 
-def test_3_full_disk_is_exit_3_with_the_older_file_kept(tmp_path: Path) -> None:
+def test_full_disk_is_exit_3_with_the_older_file_kept(tmp_path: Path) -> None:
     rrd = tmp_path / "full.rrd"
     rrd.write_bytes(OLD)
     limit = 500_000  # [bytes]; a nominal recording is several MB
@@ -422,11 +421,11 @@ def test_3_full_disk_is_exit_3_with_the_older_file_kept(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["full.rrd"]
 
 
-# ---------------------------------------------------------------------------- 4: signals
+# -------------------------------------------------------------------------- stop signals
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=str)
-def test_4_stop_signals_finish_the_recording_and_print_the_summary(
+def test_stop_signals_finish_the_recording_and_print_the_summary(
     tmp_path: Path, sig: signal.Signals
 ) -> None:
     rrd = tmp_path / "stopped.rrd"
@@ -446,7 +445,7 @@ def test_4_stop_signals_finish_the_recording_and_print_the_summary(
     assert events_in(rrd)[-1] == "interrupted by the user"
 
 
-# ---------------------------------------------------------------------------- 5, 6: sweeps
+# ---------------------------------------------------------------------------------- sweeps
 
 
 def sweep_report(out: str) -> dict[str, Any]:
@@ -456,7 +455,7 @@ def sweep_report(out: str) -> dict[str, Any]:
 
 
 @pytest.mark.parametrize("workers", [1, 2])
-def test_5_ctrl_c_stops_a_sweep_within_a_second_with_a_partial_report(workers: int) -> None:
+def test_ctrl_c_stops_a_sweep_within_a_second_with_a_partial_report(workers: int) -> None:
     proc = cli("sweep", "--trials", "200", "--workers", str(workers), "--json")
     time.sleep(6.0)  # a few trials done, even on a loaded machine
     assert proc.poll() is None
@@ -488,7 +487,7 @@ def _workers(pid: int) -> list[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
-def test_6_a_dead_worker_is_a_failed_trial_with_its_seed() -> None:
+def test_a_dead_worker_is_a_failed_trial_with_its_seed() -> None:
     # Six trials on two workers: a live worker holds a trial until the last ones are handed
     # out (two trials alone can be over before a loaded machine gets to the kill).
     proc = cli("sweep", "--trials", "6", "--workers", "2", "--seed", "7", "--json")
@@ -507,16 +506,16 @@ def test_6_a_dead_worker_is_a_failed_trial_with_its_seed() -> None:
     assert set(report["failed_seeds"]["worker-died"]) <= set(range(7, 13))
 
 
-# ---------------------------------------------------------------------------- 7: streams
+# --------------------------------------------------------------------- stdout and stderr
 
 
-def test_7_closed_stderr_is_no_problem() -> None:
+def test_closed_stderr_is_no_problem() -> None:
     code, out, _ = finish(cli("run", stderr=None, preexec_fn=lambda: os.close(2)))
     assert code == 0
     assert "SUCCESS" in out
 
 
-def test_7_full_stdout_is_exit_3_in_one_line() -> None:
+def test_full_stdout_is_exit_3_in_one_line() -> None:
     with open("/dev/full", "w") as full:
         code, _, err = finish(cli("scenarios", "--json", stdout=full))
     assert code == 3
@@ -524,7 +523,7 @@ def test_7_full_stdout_is_exit_3_in_one_line() -> None:
     assert line == "pickplace: error: cannot write the output to stdout: No space left on device"
 
 
-def test_7_a_reader_that_goes_away_is_exit_141_and_silent() -> None:
+def test_a_reader_that_goes_away_is_exit_141_and_silent() -> None:
     proc = cli("scenarios", "--json")
     assert proc.stdout is not None
     proc.stdout.close()  # like `pickplace scenarios --json | true`
@@ -543,7 +542,7 @@ def handles(pid: int, sig: signal.Signals) -> bool:
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc")
 @pytest.mark.parametrize("after", [0.0, 0.3])
-def test_7_ctrl_c_during_set_up_still_gives_the_summary(after: float) -> None:
+def test_ctrl_c_during_set_up_still_gives_the_summary(after: float) -> None:
     proc = cli("run", "--json")
     # Python itself catches SIGINT from its start; SIGHUP only once pickplace's handler is
     # installed, the first thing its main() does. Before that a Ctrl-C is Python's.
@@ -560,11 +559,11 @@ def test_7_ctrl_c_during_set_up_still_gives_the_summary(after: float) -> None:
     assert summary["failure"] == "interrupted"
 
 
-# ---------------------------------------------------------------------------- 8: scenes
+# ---------------------------------------------------------- timesteps and control rates
 
 
 @pytest.mark.parametrize("timestep", ["0", "1e-300", "-0.002", "0.02"])
-def test_8_unusable_timesteps_are_bad_input(tmp_path: Path, timestep: str) -> None:
+def test_unusable_timesteps_are_bad_input(tmp_path: Path, timestep: str) -> None:
     scene = scene_copy(tmp_path, timestep)
     code, _, err = finish(cli("run", "--scene", str(scene), cwd=tmp_path))
     assert code == 2
@@ -573,7 +572,7 @@ def test_8_unusable_timesteps_are_bad_input(tmp_path: Path, timestep: str) -> No
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
 
 
-def test_8_a_robot_file_cannot_change_the_world_timestep(tmp_path: Path) -> None:
+def test_a_robot_file_cannot_change_the_world_timestep(tmp_path: Path) -> None:
     robot = robot_copy(tmp_path, gripper_timestep="0.001")
     code, out, err = finish(cli("plan", "--robot", str(robot), "--json", cwd=tmp_path))
     assert code == 0, err
@@ -587,7 +586,7 @@ def test_8_a_robot_file_cannot_change_the_world_timestep(tmp_path: Path) -> None
 
 
 @pytest.mark.parametrize("timestep", [0.002, 0.001, 0.003, 0.0025, 1e-4])
-def test_8_valid_rates_are_whole_numbers_of_steps_in_the_range(timestep: float) -> None:
+def test_valid_rates_are_whole_numbers_of_steps_in_the_range(timestep: float) -> None:
     rates = valid_control_rates(timestep)
     assert rates == sorted(rates, reverse=True)
     for rate in rates:
@@ -601,14 +600,14 @@ def test_8_valid_rates_are_whole_numbers_of_steps_in_the_range(timestep: float) 
     assert rates == pytest.approx(expected)
 
 
-def test_8_rate_message_lists_this_scenes_rates() -> None:
+def test_rate_message_lists_this_scenes_rates() -> None:
     code, _, err = finish(cli("run", "--control-rate", "1000"))
     assert code == 2
     (line,) = clean_stderr(err)
     assert line.endswith("are 500 Hz / n: 500, 250, 166.667, 125, 100")
 
 
-def test_8_a_listed_rate_runs() -> None:
+def test_a_listed_rate_runs() -> None:
     code, out, err = finish(cli("run", "--control-rate", "166.667", "--json"))
     assert code == 0, err
     summary = one_json(out)
@@ -616,7 +615,7 @@ def test_8_a_listed_rate_runs() -> None:
     assert summary["sim_time_s"] == pytest.approx(summary["ticks"] * 0.006, abs=1e-9)
 
 
-# ---------------------------------------------------------------------------- 10: smaller
+# -------------------------------------------------------------------- inputs and defaults
 
 
 @pytest.mark.parametrize(
@@ -629,7 +628,7 @@ def test_8_a_listed_rate_runs() -> None:
         ("nowhere.rrd", "is a symbolic link to"),
     ],
 )
-def test_10_unusable_record_paths_are_named_correctly(
+def test_unusable_record_paths_are_named_correctly(
     tmp_path: Path, record: str, expected: str
 ) -> None:
     (tmp_path / "dir.rrd").mkdir()
@@ -652,7 +651,7 @@ def shared_dir() -> Iterator[Path]:
     folder.rmdir()
 
 
-def test_10_read_only_file_is_named_as_such(shared_dir: Path) -> None:
+def test_read_only_file_is_named_as_such(shared_dir: Path) -> None:
     rrd = shared_dir / "ro.rrd"
     rrd.write_bytes(OLD)
     rrd.chmod(0o444)
@@ -670,7 +669,7 @@ def test_10_read_only_file_is_named_as_such(shared_dir: Path) -> None:
     assert rrd.read_bytes() == OLD
 
 
-def test_10_a_symlink_is_followed_and_stays_a_symlink(tmp_path: Path) -> None:
+def test_a_symlink_is_followed_and_stays_a_symlink(tmp_path: Path) -> None:
     (tmp_path / "real").mkdir()
     link = tmp_path / "link.rrd"
     link.symlink_to(tmp_path / "real" / "run.rrd")  # dangling until the run ends
@@ -681,14 +680,14 @@ def test_10_a_symlink_is_followed_and_stays_a_symlink(tmp_path: Path) -> None:
     assert one_json(out)["recording"] == str(link)
 
 
-def test_10_huge_yaw_is_named() -> None:
+def test_huge_yaw_is_named() -> None:
     code, _, err = finish(cli("run", "--brick=0,-0.55,1e300"))
     assert code == 2
     (line,) = clean_stderr(err)
     assert "--brick: brick yaw must be in [-2π, 2π]" in line
 
 
-def test_10_version_and_sweep_help() -> None:
+def test_version_and_sweep_help() -> None:
     from importlib.metadata import version
 
     code, out, _ = finish(cli("--version"))
@@ -707,7 +706,7 @@ def test_10_version_and_sweep_help() -> None:
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="needs CPU affinity")
-def test_10_default_workers_follow_cpu_affinity() -> None:
+def test_default_workers_follow_cpu_affinity() -> None:
     code, out, err = finish(
         cli(
             "sweep",

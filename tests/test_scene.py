@@ -18,7 +18,7 @@ from pickplace.sim.loader import load_scene
 from pickplace.sweep.sweep import SweepRequest, run_sweep
 from pickplace.world.scene import WorldNames
 
-# Sum of the iiwa 14 joint offsets along z plus the flange (issue 2): the flange height at q = 0.
+# Sum of the iiwa 14 joint offsets along z plus the flange: the flange height at q = 0.
 FLANGE_HEIGHT_AT_ZERO = 0.1575 + 0.2025 + 0.2045 + 0.2155 + 0.1845 + 0.2155 + 0.081 + 0.045
 
 

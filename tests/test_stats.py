@@ -58,7 +58,7 @@ def test_wilson_matches_r_binom_to_1e9(x: int, n: int, low: float, high: float) 
     assert r.high == pytest.approx(high, abs=1e-9)
 
 
-def test_issue_example_193_of_200() -> None:
+def test_wilson_interval_of_193_successes_in_200_is_about_93_to_98_percent() -> None:
     r = wilson_interval(193, 200)
     assert r.rate == 0.965
     assert 0.925 < r.low < 0.935 and 0.978 < r.high < 0.988  # "about 93-98 %"

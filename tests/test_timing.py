@@ -1,4 +1,4 @@
-"""Time-optimal timing by the robot's limits (issue 13): the TOPP solution against the toppra
+"""Time-optimal timing by the robot's limits: the TOPP solution against the toppra
 package and against the limits it must respect; plans retimed without changing their path."""
 
 from __future__ import annotations

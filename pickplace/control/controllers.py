@@ -8,11 +8,15 @@ velocity V_WG_ff and the pose error e (target minus current, world frame) it ask
 and returns the joint velocities q̇ [rad/s] that realise it, with a status:
 
 - ``qp``   (default): mink's FrameTask + PostureTask + ConfigurationLimit + VelocityLimit solved
-  with daqp (seed lecture 000: differential IK as a QP with velocity limits). Never exceeds
+  with daqp (differential IK as a QP with velocity limits, as in Drake's DiffIK). Never exceeds
   the joint speed limits.
 - ``pinv``: q̇ = J⁺ V_cmd with an SVD pseudo-inverse whose singular values below a cutoff are
-  treated as zero (seed 002). Not clipped: near a singularity it asks for huge speeds.
-- ``dls``: damped least squares q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ V_cmd (seed 003). Not clipped.
+  treated as zero (the lecture's pseudo-inverse controller). Not clipped: near a singularity it
+  asks for huge speeds.
+- ``dls``: damped least squares q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ V_cmd. Not clipped.
+
+The three near a singularity, measured: ``docs/physics-notes.md`` ("mink 1.3 and the
+controllers").
 """
 
 from __future__ import annotations
@@ -180,7 +184,7 @@ class DiffIKController(ABC):
 
 
 class PinvController(DiffIKController):
-    """q̇ = J⁺ V with an SVD pseudo-inverse (seed 002).
+    """q̇ = J⁺ V with an SVD pseudo-inverse.
 
     Args:
         cutoff: Singular values below this are treated as zero (their directions get no
@@ -204,7 +208,7 @@ class PinvController(DiffIKController):
 
 
 class DLSController(DiffIKController):
-    """Damped least squares q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ V (seed 003).
+    """Damped least squares q̇ = Jᵀ(J Jᵀ + λ² I)⁻¹ V.
 
     Args:
         damping: λ [same units as σ].

@@ -1,7 +1,7 @@
 """Jacobian health: singular values, condition number, manipulability, and Jᵀ statics.
 
-Manipulability measures follow seed notes 003 (Sciavicco & Siciliano / Yoshikawa), for a
-Jacobian J (m × n, m ≤ n) with singular values σ₁ ≥ … ≥ σₘ:
+Manipulability measures follow Yoshikawa and Sciavicco & Siciliano, for a Jacobian J (m × n,
+m ≤ n) with singular values σ₁ ≥ … ≥ σₘ:
 
 - w1 = sqrt(det(J Jᵀ)) = Π σᵢ (volume of the velocity ellipsoid),
 - w2 = σmin / σmax (inverse condition number, isotropy),
@@ -165,7 +165,7 @@ def holding_torques(J: np.ndarray, mass: float, gravity_W: np.ndarray = GRAVITY_
     """Joint torques [N m] that hold a load of ``mass`` [kg] at the Jacobian's point (Jᵀ statics).
 
     The load pulls on the tool with f = mass · g; the arm must push back with −f, so
-    τ = Jᵥᵀ (−mass · g) (seed lecture 001: τ = Jᵀ F).
+    τ = Jᵥᵀ (−mass · g) (the statics relation τ = Jᵀ F).
 
     Args:
         J: Spatial Jacobian [v; ω] in world, shape (6, n), or a stack (..., 6, n).

@@ -1,8 +1,13 @@
-"""Keyframes of a gripper motion and their timing under speed and acceleration limits.
+"""Keyframes of a gripper motion and their first, Cartesian timing.
 
-Each segment between consecutive keyframes gets the shortest duration for which the motion
-profile (see :mod:`pickplace.planning.trajectory`) respects the linear and angular speed and
-acceleration limits of :class:`PlanConfig`; the gripper stops at every keyframe.
+:func:`time_keyframes` gives each segment between consecutive keyframes the shortest duration
+for which the motion profile (see :mod:`pickplace.planning.trajectory`) respects the linear and
+angular speed and acceleration limits of :class:`PlanConfig`; under a profile the tool comes to
+rest at every keyframe. Plans executed as made keep this timing (``singular-reach``'s line, a
+plan run without the pre-flight). The planner uses it, with speeds of its own, only to sweep a
+candidate's path; its plans are then timed by the robot's limits
+(:func:`pickplace.planning.timing.retime`), under which the tool stops only where the gripper
+acts and at the ends, and passes through the other keyframes.
 """
 
 from __future__ import annotations
@@ -34,10 +39,17 @@ class PlanConfig:
     """Limits and parameters of pick-and-place planning.
 
     Attributes:
-        max_linear_speed: Maximum linear speed of G's origin [m/s].
-        max_angular_speed: Maximum angular speed of G [rad/s].
-        max_linear_accel: Maximum linear acceleration [m/s²].
-        max_angular_accel: Maximum angular acceleration [rad/s²].
+        max_linear_speed: Linear speed of G's origin that the Cartesian timing
+            (:func:`time_keyframes`) allows [m/s]. It bounds only plans executed as timed here
+            (``singular-reach``, a plan run without the pre-flight): the planner replaces both
+            speeds to space its path sweep and times its plans by the robot's joint limits
+            (:class:`~pickplace.planning.timing.TimingConfig`, whose optional ``tool_speed``
+            and ``tool_accel`` are the tool limits of those plans).
+        max_angular_speed: Angular speed of G that the Cartesian timing allows [rad/s]; likewise.
+        max_linear_accel: Linear acceleration that the Cartesian timing allows [m/s²]; likewise
+            (the planner's path sweep, at constant speed, does not use it).
+        max_angular_accel: Angular acceleration that the Cartesian timing allows [rad/s²];
+            likewise.
         approach_distance: Offset of pre-pick, pre-place and retreat from the grasp, backwards
             along the approach axis (G's -z, world up for a top grasp) [m].
         lift_height: Height the brick is lifted straight up after closing [m].

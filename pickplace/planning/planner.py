@@ -6,8 +6,8 @@ order,
 taking the first that is feasible:
 
 1. "across the width": the top-down grasp closing across the brick's width whose yaw is
-   nearest the tool's (carried along by the base swing) — the grasp every plan used before
-   candidates existed;
+   nearest the tool's (carried along by the base swing) — the default grasp of
+   :func:`~pickplace.planning.plan.plan_pick_place`;
 2. "across the width, turned 180°": its symmetric twin about the brick's vertical axis;
 3. "across the length": turned 90°, closing across the brick's length, the nearer yaw of the
    two — only when the open fingers clear the brick's length by the pre-flight clearance on
@@ -15,7 +15,7 @@ taking the first that is feasible:
 4. "across the length, turned 180°".
 
 Every candidate's clearance via-point turns with the base swing (``via="swing"``, see
-:func:`pickplace.planning.plan.plan_pick_place`). Measured on bin 1 (``planning-failures.md``): the
+:func:`pickplace.planning.plan.plan_pick_place`). Measured on bin 1 (``docs/physics-notes.md``): the
 180° twin rescues only wrist cases, the 90° grasp every wall case; the swing via-point every
 wrist case. If none is feasible the report says so, with each candidate's first problem.
 

@@ -52,7 +52,7 @@ class PreflightConfig:
     Attributes:
         rate_hz: Rate at which the controller is run and every check made [Hz]. 20 Hz predicts
             the same problems as the 100 Hz control rate on the measured plans at a fifth of
-            the cost (see ``../shared/notes/planning-failures.md``).
+            the cost (see ``docs/physics-notes.md``, "Planning failures on bin 1").
         clearance: Smallest distance allowed between a robot geom (or the held brick) and the
             world [m]: a few mm more than the position actuators' tracking error.
         detection_distance: Distances up to this are measured, for the reported minimum

@@ -1,15 +1,23 @@
 """Motion profiles and the time-parameterised gripper pose trajectory through keyframes.
 
-Segment ``i`` runs from keyframe ``i`` to keyframe ``i + 1``. With ``τ = (t - t_i) / T_i``
-and a motion profile ``s(τ)`` (``s(0) = 0``, ``s(1) = 1``):
+Segment ``i`` runs from keyframe ``i`` to keyframe ``i + 1``. Its progress ``s`` along its path
+comes either from a motion profile ``s(τ)`` with ``τ = (t - t_i) / T_i`` (``s(0) = 0``,
+``s(1) = 1``) or from the segment's time law (:class:`TimeLaw`, e.g. the robot's time-optimal
+timing of :mod:`pickplace.planning.timing`). Then:
 
-* position moves on the straight line ``p_WG = p_i + s(τ) (p_{i+1} - p_i)``;
-* orientation follows the shortest-arc slerp ``R_WG = R_i · exp(s(τ) · φ_i)`` with
-  ``φ_i = log(R_i⁻¹ R_{i+1})`` (angle in [0, π]).
+* position moves on the straight line ``p_WG = p_i + s (p_{i+1} - p_i)``, or, for a segment
+  that ends at a ``curve`` keyframe, on a cubic Hermite curve that leaves and reaches
+  pass-through keyframes along their path tangent;
+* orientation follows the shortest-arc slerp ``R_WG = R_i · exp(s · φ_i)`` with
+  ``φ_i = log(R_i⁻¹ R_{i+1})`` (angle in [0, π]); next to a pass-through keyframe ``s`` is
+  replaced by a cubic progress ``g(s)`` that keeps the angular velocity continuous there.
 
-The sine and minimum-jerk profiles have ``s'(0) = s'(1) = 0``, so the gripper stops at every
-keyframe and its velocity is continuous. Spatial velocities are ``V_WG = [v_W; ω_W]``: linear
-velocity of G's origin then angular velocity, both expressed in world (mink's tangent order).
+The sine and minimum-jerk profiles have ``s'(0) = s'(1) = 0``: a segment timed by a profile
+starts and ends at rest, so under a profile the gripper stops at every keyframe, and its
+velocity is continuous. A time law stops only at keyframes marked ``stop`` and passes through
+the others: the planner's plans stop only where the gripper acts and at their ends. Spatial
+velocities are ``V_WG = [v_W; ω_W]``: linear velocity of G's origin then angular velocity,
+both expressed in world (mink's tangent order).
 """
 
 from __future__ import annotations
@@ -507,11 +515,12 @@ class PoseTrajectory:
     def sample(self, t: float) -> tuple[FloatArray, FloatArray, float]:
         """The plan at time ``t`` [s]: the trajectory's one evaluator.
 
-        Position on the straight line ``p_i + s Δp``, orientation ``R_i · exp(s φ_i)`` (MuJoCo's
-        quaternion integration), spatial velocity ``ṡ [Δp; R_i φ_i]`` with ``s = s(τ)``,
-        ``ṡ = s'(τ) / T_i`` under the profile, or ``(s, ṡ)`` from the segment's time law; width
-        ``w_i + τ Δw`` (a linear ramp in time). Times before the first keyframe or after the last
-        clamp to the ends, where the velocity is zero.
+        Position on the straight line ``p_i + s Δp`` (or the segment's curve), orientation
+        ``R_i · exp(s φ_i)`` (MuJoCo's quaternion integration; ``g(s)`` for ``s`` next to a
+        pass-through keyframe), spatial velocity ``ṡ [Δp; R_i φ_i]`` on a line with
+        ``s = s(τ)``, ``ṡ = s'(τ) / T_i`` under the profile, or ``(s, ṡ)`` from the segment's
+        time law; width ``w_i + τ Δw`` (a linear ramp in time). Times before the first keyframe
+        or after the last clamp to the ends, where the velocity is zero.
 
         Args:
             t: Time [s].

@@ -142,7 +142,7 @@ class Plot(Series):
 
 
 # Every recorded plot, in blueprint order: its entity, view, series names and style, and what it
-# reads from the tick log. The README's entity table describes each one for users.
+# reads from the tick log. The entity table of docs/recordings.md describes each one for users.
 PLOTS: tuple[Plot, ...] = (
     # σ1..σ6 of the 6×n tool Jacobian (n arm joints; min(6, n) values), and σt1..σt3 of its
     # 3×n translational rows.

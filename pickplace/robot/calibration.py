@@ -23,7 +23,7 @@ timestep and solver options. Then:
    between them, until the pads stay the same. (Only a brick-sized box finds the innermost
    geoms over the brick's height, e.g. pads set back from a longer finger; only the probe
    keeps a box at the fingertips off what protrudes inwards above the pads, e.g. knuckles.)
-4. **Squeeze force**: with stiff pads (grasp-physics.md), closed on the brick-sized box at the
+4. **Squeeze force**: with stiff pads (docs/physics-notes.md), closed on the brick-sized box at the
    tool point: the pads' normal forces per side, the gap between their faces, and any other
    gripper geom touching the box (reported).
 5. **Gap map**: the command is swept from closed to open without the box; at each step the gap

@@ -271,7 +271,7 @@ class RobotDescription:
         if not source.is_file():
             raise RobotError(
                 f"{source}: robot description does not exist; valid: a TOML file with "
-                f"name, [arm] and [gripper] (see README 'Your own robot')"
+                f"name, [arm] and [gripper] (see docs/robots.md)"
             )
         try:
             table = tomllib.loads(source.read_text(encoding="utf-8"))
@@ -294,7 +294,7 @@ class RobotDescription:
             )
         for section in ("arm", "gripper"):
             if not isinstance(table.get(section), dict):
-                raise _fail(source, f"[{section}]", "missing table; valid: see README")
+                raise _fail(source, f"[{section}]", "missing table; valid: see docs/robots.md")
         return cls(
             source=source,
             name=name,

@@ -43,7 +43,7 @@ def home_candidates(
     the pose within 0.1 mm and 1 mrad give the candidates (postures within
     :data:`HOME_DISTINCT` of each other count once), ordered by their distance from the nearest
     joint limit relative to the range (continuous joints count ±π), largest first. Margin alone
-    does not make a good home (``../shared/notes/robot-models.md``): the scene loader
+    does not make a good home (``docs/physics-notes.md``): the scene loader
     (:mod:`pickplace.sim.loader`) chooses among them by the pre-flight of the nominal plan.
     """
     target = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, HOME_TOOL_SITE)

@@ -1,7 +1,7 @@
 """Load an arm or gripper MJCF file as published elsewhere, repairing what can be repaired.
 
 Published robot files are written to be loaded on their own, or by another project's code; put
-into a composed scene they meet these pitfalls (``../shared/notes/robot-models.md``):
+into a composed scene they meet these pitfalls (``docs/physics-notes.md``):
 
 * asset paths relative to the file (or to its ``<compiler meshdir/texturedir/assetdir>``), which
   an attached child resolves against the parent's folder: every asset path is made absolute;

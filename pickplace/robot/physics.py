@@ -1,8 +1,8 @@
 """The physics every composed robot gets, whatever its files say.
 
 Published arm and gripper files leave to their project's code what our grasp needs
-(``../shared/notes/robot-models.md``, ``grasp-physics.md``). These edits, made on a part's
-``MjSpec`` before it is composed, supply it:
+(``docs/physics-notes.md``: "Arm and gripper files from elsewhere", "Grasp physics"). These
+edits, made on a part's ``MjSpec`` before it is composed, supply it:
 
 * torque ``motor`` actuators become position actuators (``kp``, critical damping) whose force
   range is the motor's torque limit and whose control range is the joint's range;
@@ -35,8 +35,8 @@ ROBOT_CONAFFINITY = 1 << 0
 """... but robot geoms accept world geoms (contype 1): robot–world contacts, no self-collision."""
 
 ARM_KP = 2000.0
-"""Position gain of an arm actuator made from a motor [N·m/rad] (robot-models.md: 500–10,000
-all picked; 2000 with critical damping is what today's arm uses)."""
+"""Position gain of an arm actuator made from a motor [N·m/rad] (docs/physics-notes.md: 500 to
+10,000 all picked; 2000 with critical damping is what the bundled arms use)."""
 
 ARM_STABILITY = 0.5
 """Largest ω·dt of a position-controlled arm joint on its armature alone: armature is raised to
@@ -47,13 +47,13 @@ GRIPPER_SATURATION_STROKE = 0.1
 fraction of the joint's stroke past the finger: ``kp = force limit / (0.1 · stroke)``."""
 
 GRIPPER_MIN_ARMATURE = 0.002
-"""Minimum armature of a gripper joint [kg·m² or kg] (robot-models.md)."""
+"""Minimum armature of a gripper joint [kg·m² or kg] (docs/physics-notes.md)."""
 
 GRIPPER_MIN_DAMPING = 0.05
-"""Minimum damping of a gripper joint [N·m·s/rad or N·s/m] (robot-models.md)."""
+"""Minimum damping of a gripper joint [N·m·s/rad or N·s/m] (docs/physics-notes.md)."""
 
 PAD_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
-"""solimp of stiff pads (grasp-physics.md)."""
+"""solimp of stiff pads (docs/physics-notes.md, "Grasp physics")."""
 
 COUPLING_SOLREF = (0.005, 1.0)
 COUPLING_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
@@ -182,7 +182,7 @@ def set_gripper_joint_minimums(spec: mujoco.MjSpec) -> None:
 
 
 def set_stiff_pad(geom: mujoco.MjsGeom, timestep: float) -> None:
-    """Stiff priority contact on a pad geom (grasp-physics.md); its friction is kept."""
+    """Stiff priority contact on a pad geom (docs/physics-notes.md); its friction is kept."""
     geom.priority = 1
     geom.solref = [2.0 * timestep, 1.0]
     geom.solimp = list(PAD_SOLIMP)

@@ -12,7 +12,7 @@ fill the log's grasp-dependent rows; it never acts on the simulation.
 To add a check: subclass :class:`Check` in this module, with its reason in
 :class:`FailureReason` if it is a new one, add it to :data:`PLACE_CHECKS` (or
 :data:`REACH_CHECKS`) at the precedence it should have, give it a test that makes it fail and
-one that does not, and add the reason to the README's failure list.
+one that does not, and add the reason to the failure list of docs/failures.md.
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@ change the world, and the checks must notice. A fault that must act at a moment 
 reads it from the plan's phases, never from keyframe names.
 
 To add a fault scenario: a class here with ``name`` and ``apply(world, tick)``, a
-:class:`~pickplace.sim.scenarios.Scenario` row with its expected outcome, and the README row.
+:class:`~pickplace.sim.scenarios.Scenario` row with its expected outcome, and its rows in the
+scenario tables of README.md and docs/scenarios.md.
 """
 
 from __future__ import annotations

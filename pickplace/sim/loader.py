@@ -9,7 +9,7 @@
 2. a robot whose description gives no home has several IK home candidates; each is tried by
    the planner on the nominal pick-and-place (brick at bin 1's centre to bin 2's centre) with
    its kinematic pre-flight, and the home of the best plan is kept: feasible first, then the
-   earlier grasp candidate, then the larger joint margin (``../shared/notes/robot-models.md``:
+   earlier grasp candidate, then the larger joint margin (``docs/physics-notes.md``:
    margin to the limits alone picked homes that ran the last joint into its limit);
 3. the ``home`` keyframe holds that posture with the gripper open as plans open it
    (:func:`pickplace.planning.plan.for_gripper`).

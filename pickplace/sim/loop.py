@@ -21,7 +21,7 @@ explicit fault injected by a scenario (:mod:`pickplace.sim.faults`).
 
 The loop knows nothing of grasps or bins: the task's goal (:mod:`pickplace.sim.goals`) supplies the
 checks that judge each block (:mod:`pickplace.sim.checks`) and the verdict on the end state, from
-geometry stated in :class:`~pickplace.sim.verdict.SuccessCriteria`.
+geometry stated in :class:`~pickplace.sim.checks.SuccessCriteria`.
 """
 
 from __future__ import annotations

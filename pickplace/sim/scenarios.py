@@ -4,8 +4,9 @@
 runs every scenario and checks its documented outcome (:attr:`Scenario.expected`).
 
 To add a scenario: a builder function here and a :class:`Scenario` row in :data:`SCENARIOS`
-(with its expected outcome per controller), and the README's scenario table row; the
-parametrised test picks it up.
+(with its expected outcome per controller), and its row in the scenario tables of README.md and
+docs/scenarios.md (``tests/test_docs.py`` checks that both state its outcomes); the parametrised
+test picks it up.
 """
 
 from __future__ import annotations
@@ -186,7 +187,8 @@ def full_stretch_distance(scene: Scene, z_tool: float) -> float:
 
 
 def singular_reach_task(req: BuildRequest, plan: PlanConfig | None = None) -> Task:
-    """A straight radial line that pulls the tool past full stretch and back (seed 000).
+    """A straight radial line that pulls the tool past full stretch and back (where a
+    pseudo-inverse asks for joint speeds above the limits and the QP does not).
 
     The line runs along +y from the base axis (away from both bins) at a height of 0.30 m with
     the tool pointing down. Its far end lies ``REACH_OVERSHOOT`` beyond the arm's reach there,

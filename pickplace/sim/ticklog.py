@@ -2,9 +2,9 @@
 
 The loop writes the *raw* rows every tick: the plan, the IK's result and commands, and the
 simulated state copied from MuJoCo. :meth:`TickLog.derive` then fills the *derived* rows of a
-block of ticks in one vectorised pass: the Jacobian's health (seed notes 003: singular values,
-condition number, manipulability w1–w4, the translational velocity ellipsoid), the tracking
-errors, the grip force, the speed and position limits. The grasp-dependent rows (``slip``,
+block of ticks in one vectorised pass: the Jacobian's health (singular values, condition
+number, manipulability w1–w4, the translational velocity ellipsoid), the tracking errors, the
+grip force, the speed and position limits. The grasp-dependent rows (``slip``,
 ``holding_torque``) are filled by the grasp monitor (:mod:`pickplace.sim.checks`), which knows the
 grasp state.
 """

@@ -97,7 +97,7 @@ def placement_problems(
 
 
 def run_metrics(log: TickLog, ticks: int, X_WO_final: SE3, X_WO_goal: SE3 | None) -> dict[str, Any]:
-    """The summary's metrics over the first ``ticks`` rows of the log (see the README)."""
+    """The summary's metrics over the first ``ticks`` rows of the log (see docs/cli.md)."""
     sl = slice(0, ticks)
     counts = {s: 0 for s in IK_STATUSES}
     for code, c in zip(*np.unique(log.ik_status[sl], return_counts=True), strict=True):
@@ -170,7 +170,7 @@ class RunResult:
         return text
 
     def summary(self) -> dict[str, Any]:
-        """JSON-serialisable summary (the keys are an interface: see the README)."""
+        """JSON-serialisable summary (the keys are an interface: see docs/cli.md)."""
         rtf = self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else float("inf")
         out: dict[str, Any] = {
             "scenario": self.scenario,

@@ -12,7 +12,7 @@ From the trials' compact summaries (:func:`pickplace.sweep.sweep.compact_summary
   difference, McNemar's exact test);
 - every trial's record (seed, outcome, metrics and drawn parameters) under ``trial_results``.
 
-The keys are an interface (see the README); :data:`SWEEP_WALL_TIME_FIELDS` are the ones that
+The keys are an interface (see docs/sweeps.md); :data:`SWEEP_WALL_TIME_FIELDS` are the ones that
 measure the wall clock.
 """
 
