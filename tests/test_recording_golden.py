@@ -2,12 +2,15 @@
 
 ``tests/data/golden_recording.json`` (written by ``scripts/golden_recording.py``, whose
 docstring says when to regenerate it) pins the entities of the nominal run's recording, their
-static components, the size and range of their temporal columns, and the embedded blueprint.
-The tick log of the very same run then fixes every value of the per-tick entities exactly.
+static components, the size and range of their temporal columns, and the embedded blueprint:
+counts, names and texts exactly, numbers within the tolerance of what they hold (the table in
+that script), so that a file recorded on another CPU passes here. The tick log of the very same
+run then fixes every value of the per-tick entities exactly.
 """
 
 from __future__ import annotations
 
+import copy
 import json
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,12 +27,14 @@ from pickplace.sim.ticklog import TickLog
 from pickplace.world.scene import Scene
 from scripts.golden_recording import (
     PATH,
+    TOLERANCES,
     describe_blueprint,
     describe_recording,
+    first_difference,
     read_columns,
     record_nominal_run,
 )
-from scripts.golden_summaries import first_difference
+from scripts.golden_summaries import untolerated_fields, unused_rules
 
 GOLDEN: dict[str, Any] = json.loads(PATH.read_text())
 
@@ -53,23 +58,72 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
 
 
 def test_entities_and_their_contents_are_unchanged(recorded: Recorded) -> None:
-    diff = first_difference(describe_recording(recorded.path), GOLDEN["entities"])
+    diff = first_difference(describe_recording(recorded.path), GOLDEN["entities"], "entities")
     assert diff is None, diff
 
 
 def test_blueprint_is_unchanged() -> None:
-    diff = first_difference(describe_blueprint(build_blueprint()), GOLDEN["blueprint"])
+    diff = first_difference(describe_blueprint(build_blueprint()), GOLDEN["blueprint"], "blueprint")
     assert diff is None, diff
+
+
+def test_every_number_has_a_tolerance_and_every_tolerance_a_field() -> None:
+    assert untolerated_fields(TOLERANCES, [GOLDEN]) == set()
+    assert unused_rules(TOLERANCES, [GOLDEN]) == []
+
+
+def _entities_with(path: str, component: str, **stats: Any) -> dict[str, Any]:
+    """The recorded entities with some statistics of one temporal column replaced."""
+    entities = copy.deepcopy(GOLDEN["entities"])
+    entities[path]["temporal"][component].update(stats)
+    return entities
+
+
+def _entities_diff(entities: dict[str, Any]) -> str | None:
+    return first_difference(entities, GOLDEN["entities"], "entities")
 
 
 def test_the_comparison_sees_a_changed_style_and_a_missing_entity() -> None:
     entities = GOLDEN["entities"]
-    assert first_difference(entities, entities) is None
+    assert _entities_diff(entities) is None
     plot = "plots/joints/speed"
     changed = dict(entities[plot], static=dict(entities[plot]["static"], **{"x": 1}))
-    assert plot in str(first_difference(dict(entities, **{plot: changed}), entities))
+    assert plot in str(_entities_diff(dict(entities, **{plot: changed})))
     fewer = {k: v for k, v in entities.items() if k != plot}
-    assert first_difference(fewer, entities) is not None
+    assert _entities_diff(fewer) is not None
+
+
+def test_the_comparison_sees_a_row_more_and_a_value_beyond_its_tolerance() -> None:
+    force, scalars = "plots/gripper/pad_force", "Scalars:scalars"
+    column = GOLDEN["entities"][force]["temporal"][scalars]
+    assert _entities_diff(_entities_with(force, scalars, rows=column["rows"] + 1)) is not None
+    last_tick = GOLDEN["entities"][force]["temporal"]["tick"]["max"]
+    assert _entities_diff(_entities_with(force, "tick", max=last_tick + 1.0)) is not None
+    # Forces to 1e-5 relative: 4e-4 N at the 43.6 N peak.
+    assert _entities_diff(_entities_with(force, scalars, max=column["max"] + 1e-6)) is None
+    assert _entities_diff(_entities_with(force, scalars, max=column["max"] + 1e-2)) is not None
+    # A sum of n values may move by n × the tolerance at its largest value, no more.
+    bound = column["values"] * 1e-5 * max(abs(column["min"]), abs(column["max"]))
+    assert _entities_diff(_entities_with(force, scalars, sum=column["sum"] + 0.9 * bound)) is None
+    assert _entities_diff(_entities_with(force, scalars, sum=column["sum"] + 1.1 * bound))
+    brick, translation = "world/bodies/brick", "Transform3D:translation"
+    largest = GOLDEN["entities"][brick]["temporal"][translation]["max"]  # [m]
+    assert _entities_diff(_entities_with(brick, translation, max=largest + 1e-9)) is None
+    assert _entities_diff(_entities_with(brick, translation, max=largest + 1e-5)) is not None
+
+
+def test_event_texts_compare_their_words_exactly_and_printed_numbers_to_a_digit() -> None:
+    entities = copy.deepcopy(GOLDEN["entities"])
+    items = entities["events"]["temporal"]["TextLog:text"]["items"]
+    grasp = next(i for i, item in enumerate(items) if item[0].startswith("grip closed"))
+    text = items[grasp][0]  # "grip closed: gap 49.9 mm, pad forces 39.9 / 40.1 N"
+    items[grasp] = [text.replace("49.9", "50.0")]
+    assert _entities_diff(entities) is None
+    items[grasp] = [text.replace("49.9", "50.1")]
+    assert "TextLog:text" in str(_entities_diff(entities))
+    items[grasp] = [text]
+    items[-1] = ["verdict: failure: dropped"]
+    assert "TextLog:text" in str(_entities_diff(entities))
 
 
 def _inf_to_nan(a: np.ndarray) -> np.ndarray:
