@@ -19,7 +19,8 @@ deliberately with
     python -m scripts.golden_recording --write
 
 (from the repository root) and says so in its commit message; without ``--write`` it only
-compares and prints the first difference.
+compares and prints the first difference (``--margins``: and the largest difference per
+tolerance).
 
 The comparison is that of ``scripts/golden_summaries.py`` (its docstring gives the reasons and
 the differences measured between CPU kernels), with this file's table, :data:`TOLERANCES`:
@@ -72,6 +73,7 @@ from scripts.golden_summaries import (
     Rule,
     Tolerance,
     compare,
+    print_margins,
 )
 
 PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "golden_recording.json"
@@ -272,6 +274,9 @@ def first_difference(now: Any, recorded: Any, part: str) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", action="store_true", help="regenerate the recorded file")
+    parser.add_argument(
+        "--margins", action="store_true", help="print the largest difference per tolerance"
+    )
     args = parser.parse_args(argv)
     now = describe()
     if args.write:
@@ -279,7 +284,9 @@ def main(argv: list[str] | None = None) -> int:
         PATH.write_text(json.dumps(now, indent=1, sort_keys=True) + "\n")
         print(f"wrote {len(now['entities'])} entities and the blueprint to {PATH}")
         return 0
-    comparisons = compare(now, json.loads(PATH.read_text()), TOLERANCES)
+    comparisons = list(compare(now, json.loads(PATH.read_text()), TOLERANCES))
+    if args.margins:
+        print_margins(iter(comparisons))
     diff = next((c.difference for c in comparisons if c.difference), None)
     print(diff or "the recording is unchanged")
     return 1 if diff else 0

@@ -8,7 +8,8 @@ timing, a new robot) regenerates the file deliberately with
     python scripts/golden_summaries.py --write
 
 and says so in its commit message; ``--check`` (the default) only compares and prints the first
-difference of each case that changed.
+difference of each case that changed, and ``--margins`` prints, per tolerance, the largest
+difference seen and how far it is from the tolerance.
 
 Cases: ``pick-place`` with qp, pinv and dls; ``singular-reach`` with qp and pinv; every fault
 scenario with qp; ``pick-place-random`` seeds 0-19 with qp.
@@ -36,9 +37,10 @@ same physics, field by field, and a run matches it when:
 Each tolerance is (a) at least 100× the largest difference seen between the recorded file and
 runs under five OpenBLAS kernels on one machine (``OPENBLAS_CORETYPE`` Haswell, which
 reproduces the file bit for bit, SkylakeX, the machine's own, Sandybridge, Nehalem and
-Prescott), and (b) far below what a different run changes: a different grasp, slip, plan or
-failure tick moves the brick and the tool by 0.1 mm or more (the precision the event texts
-print) and times by a 10 ms tick. The largest differences seen, per kind:
+Prescott; ``--margins`` prints them), and (b) far below what a different run changes: a
+different grasp, slip, plan or failure tick moves the brick and the tool by 0.1 mm or more
+(the precision the event texts print) and times by a 10 ms tick. The largest differences seen,
+per kind:
 
 =============  =====================  ======================================================
 kind           tolerance              largest difference seen (field)
@@ -397,6 +399,23 @@ def unused_rules(rules: Sequence[Rule], documents: Iterable[Any]) -> list[str]:
     return [r.pattern for r in rules if r.pattern not in used]
 
 
+def print_margins(comparisons: Iterator[Comparison]) -> None:
+    """Print, per rule, the largest float difference relative to its tolerance, and where."""
+
+    def share(c: Comparison) -> float:
+        return c.gap / c.bound if c.bound else (math.inf if c.gap else 0.0)
+
+    worst: dict[str, Comparison] = {}
+    for c in comparisons:
+        if c.rule is not None and c.rule.kind != "text":
+            best = worst.get(c.rule.pattern)
+            if best is None or share(c) > share(best):
+                worst[c.rule.pattern] = c
+    for pattern, c in worst.items():
+        room = f"{c.bound / c.gap:.3g}× this" if c.gap else "no difference"
+        print(f"{pattern:45s} tolerance {c.bound:8.2e}, largest {c.gap:8.2e} ({room}) at {c.where}")
+
+
 # ------------------------------------------------------------------------ the cases
 
 
@@ -426,6 +445,9 @@ def summary_of(case: dict[str, Any]) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", action="store_true", help="regenerate the recorded file")
+    parser.add_argument(
+        "--margins", action="store_true", help="print the largest difference per tolerance"
+    )
     args = parser.parse_args(argv)
     if args.write:
         records = [{"case": c, "summary": summary_of(c)} for c in cases()]
@@ -435,11 +457,16 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     records = json.loads(PATH.read_text())
     changed = 0
+    comparisons: list[Comparison] = []
     for rec in records:
-        diff = first_difference(summary_of(rec["case"]), rec["summary"])
+        found = list(compare(summary_of(rec["case"]), rec["summary"], TOLERANCES))
+        comparisons += found
+        diff = next((c.difference for c in found if c.difference), None)
         if diff:
             changed += 1
             print(f"{rec['case']}: {diff}")
+    if args.margins:
+        print_margins(iter(comparisons))
     print(f"{changed} of {len(records)} summaries differ")
     return 1 if changed else 0
 

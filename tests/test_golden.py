@@ -21,7 +21,9 @@ from scripts.golden_summaries import (
     PATH,
     TOLERANCES,
     Rule,
+    compare,
     first_difference,
+    print_margins,
     printed_alike,
     summary_of,
     untolerated_fields,
@@ -158,3 +160,16 @@ def test_printed_numbers_may_move_one_unit_in_their_last_digit() -> None:
     assert first_difference(_changed(ok, where, text.replace("40.1", "40.2")), ok) is None
     assert first_difference(_changed(ok, where, text.replace("40.1", "40.3")), ok) is not None
     assert first_difference(_changed(ok, ("goal",), ok["goal"] + " "), ok) is not None
+
+
+def test_margins_name_the_largest_difference_of_each_tolerance(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    ok = _success()
+    y = ok["brick_final_xyz"][1]
+    moved = _changed(ok, ("brick_final_xyz", 1), y + 1e-8)
+    print_margins(compare(moved, ok, TOLERANCES))
+    lines = capsys.readouterr().out.splitlines()
+    line = next(line for line in lines if line.startswith("brick_final_xyz[]"))
+    assert "tolerance 5.00e-06, largest 1.00e-08 (500× this) at .brick_final_xyz[1]" in line
+    assert any(line.startswith("target_xyz[]") and "no difference" in line for line in lines)
