@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from pickplace.errors import OutputError, PickPlaceError
-from pickplace.robot.registry import DEFAULT_ROBOT
+from pickplace.robot import DEFAULT_ROBOT  # not .registry: its imports take time
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
 if TYPE_CHECKING:
@@ -107,13 +107,37 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: looks the version up only when asked (importlib.metadata takes time)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        kwargs.setdefault("help", "show the version and exit")
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        sys.stdout.write(f"pickplace {_version()}\n")
+        parser.exit()
+
+
 def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
     """The options that define a task, shared by ``run`` and ``plan``."""
     p.add_argument("--scene", type=Path, help=SCENE_HELP)
     p.add_argument("--robot", default=DEFAULT_ROBOT, help=ROBOT_HELP)
-    p.add_argument("--scenario", default="pick-place", help="scenario name (pickplace scenarios)")
+    p.add_argument(
+        "--scenario",
+        default="pick-place",
+        help="scenario name (default: pick-place; see pickplace scenarios)",
+    )
     p.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
-    p.add_argument("--seed", type=_seed, default=0, help="seed of randomised scenarios")
+    p.add_argument(
+        "--seed", type=_seed, default=0, help="seed of randomised scenarios (default: 0)"
+    )
     p.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
     p.add_argument(
         "--speed",
@@ -128,10 +152,10 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pickplace``."""
     parser = _Parser(
         prog="pickplace",
-        description=__doc__,
+        description=plain_text(__doc__ or ""),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"pickplace {_version()}")
+    parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate one scenario")
@@ -182,7 +206,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--trials", type=_positive_int, default=20, help="number of trials (default: 20)"
     )
     sweep.add_argument(
-        "--seed", type=_seed, default=0, help="seed of the first trial; trial i uses SEED + i"
+        "--seed",
+        type=_seed,
+        default=0,
+        help="seed of the first trial; trial i uses SEED + i (default: 0)",
     )
     sweep.add_argument(
         "--workers",
@@ -235,8 +262,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def plain_text(doc: str) -> str:
+    """A docstring as a terminal shows it: without reStructuredText's literal quotes."""
+    return doc.replace("``", "")
+
+
 def _add_vary(parser: argparse.ArgumentParser, how: str) -> None:
-    from pickplace.sim.vary import valid_parameters
+    from pickplace.sim.parameters import valid_parameters  # no numpy: --help answers at once
 
     parser.add_argument(
         "--vary",
@@ -381,13 +413,79 @@ class _ProgressObserver:
         self.progress.stop()
 
 
-def _human_summary(s: dict[str, Any]) -> str:
-    verdict = "SUCCESS" if s["success"] else f"FAILED ({s['failure']})"
+def _parameters_text(parameters: dict[str, Any] | None) -> str | None:
+    """The drawn ``--vary`` values with their units, ``brick_mass 11.72 kg, friction 0.8``."""
+    if not parameters or not parameters.get("values"):
+        return None
+    from pickplace.sim.parameters import PARAMETERS
+
+    parts = []
+    for name, value in parameters["values"].items():
+        p = PARAMETERS.get(name)
+        unit = "" if p is None or p.unit == "-" else f" {p.unit}"
+        parts.append(f"{name} {value:.4g}{unit}")
+    offset = parameters.get("pose_offset_applied_xy_m") or parameters.get("pose_offset_xy_m")
+    if offset is not None:
+        parts.append(f"brick moved by ({offset[0] * 1000:.1f}, {offset[1] * 1000:.1f}) mm")
+    return ", ".join(parts)
+
+
+# What to change, by the kind of a rejected candidate's first problem (planning/preflight.py).
+REFUSAL_ADVICE = {
+    "collision": "move the brick away from the bin wall or turn it (--brick X,Y,YAW)",
+    "ik": "bring the brick or the target within the arm's reach",
+    "joint-limit": "turn the brick (the YAW of --brick) so the wrist needs less rotation",
+    "speed-limit": "lower the speed (--speed, or --vary speed=...)",
+    "singularity": "move the brick away from the arm's base or its full stretch",
+}
+
+
+def _refusal_text(s: dict[str, Any], title: str) -> str:
+    """A run refused before any physics (no-feasible-plan): each candidate's first problem
+    and what to change; no metrics, since nothing moved."""
+    plan = s.get("plan") or {}
+    candidates = plan.get("candidates") or []
     lines = [
-        f"{s['scenario']} / {s['robot']} / {s['controller']} / seed {s['seed']}: {verdict}",
-        f"  sim {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s wall "
-        f"({s['realtime_factor']:.1f}x real time), {s['ticks']} ticks",
+        f"{title}: REFUSED (no-feasible-plan): none of the {len(candidates)} candidate plans "
+        "passed the pre-flight, so nothing was simulated"
     ]
+    params = _parameters_text(s.get("parameters"))
+    if params:
+        lines.append(f"  parameters: {params}")
+    kinds: list[str] = []
+    lines.append("  candidates (first problem of each):")
+    for i, c in enumerate(candidates, 1):
+        pr = c.get("problem")
+        if pr is None:
+            lines.append(f"    {i}. {c['label']}: feasible")
+            continue
+        lines.append(f"    {i}. {c['label']}: at t={pr['t']:.2f} s {pr['kind']}: {pr['text']}")
+        if pr["kind"] not in kinds:
+            kinds.append(pr["kind"])
+    advice = [REFUSAL_ADVICE[k] for k in kinds if k in REFUSAL_ADVICE]
+    rerun = f"pickplace plan --scenario {s['scenario']} --seed {s['seed']}"
+    advice.append(f"{rerun} lists every candidate with its keyframes")
+    lines.append("  to change: " + "; ".join(advice))
+    if s["recording"]:
+        lines.append(f"  recording: {s['recording']}")
+    return "\n".join(lines)
+
+
+def _human_summary(s: dict[str, Any]) -> str:
+    """A run's summary in lines of text: verdict, drawn parameters, timing, metrics, the
+    failure and the recording; a refused run gets :func:`_refusal_text` instead."""
+    title = f"{s['scenario']} / {s['robot']} / {s['controller']} / seed {s['seed']}"
+    if s["failure"] == "no-feasible-plan":
+        return _refusal_text(s, title)
+    verdict = "SUCCESS" if s["success"] else f"FAILED ({s['failure']})"
+    lines = [f"{title}: {verdict}"]
+    params = _parameters_text(s.get("parameters"))
+    if params:
+        lines.append(f"  parameters: {params}")
+    lines.append(
+        f"  sim {s['sim_time_s']:.2f} s in {s['wall_time_s']:.2f} s wall "
+        f"({s['realtime_factor']:.1f}x real time), {s['ticks']} ticks"
+    )
     if s["place_error_m"] is not None:
         lines.append(
             f"  brick final {[round(v, 4) for v in s['brick_final_xyz']]} m, "
@@ -398,9 +496,10 @@ def _human_summary(s: dict[str, Any]) -> str:
         f"{s['max_joint_speed_ratio']:.3f}, max tool position error "
         f"{s['max_position_error_m'] * 1000:.1f} mm"
     )
-    errors = [e["text"] for e in s["events"] if e["kind"] == "failure"]
-    if errors:
-        lines.append(f"  {errors[0]}")
+    failures = [e for e in s["events"] if e["kind"] == "failure"]
+    if failures:
+        e = failures[0]
+        lines.append(f"  {e['text']} (tick {e['tick']}, t={e['t']:.2f} s)")
     if s["recording"]:
         lines.append(f"  recording: {s['recording']}")
     return "\n".join(lines)
@@ -519,7 +618,7 @@ def _human_plan(p: dict[str, Any]) -> str:
 
 
 def _cmd_scenarios(args: argparse.Namespace, stop: InterruptHandler) -> int:
-    from pickplace.sim.scenarios import SCENARIOS
+    from pickplace.sim.catalog import CATALOG as SCENARIOS  # no numpy, MuJoCo or planner
 
     if args.json:
         _write_stdout(
@@ -533,28 +632,9 @@ def _cmd_scenarios(args: argparse.Namespace, stop: InterruptHandler) -> int:
     return EXIT_OK
 
 
-def robot_rows() -> list[dict[str, Any]]:
-    """One row per bundled robot: name, arm joints, gripper, open width, squeeze, file."""
-    from pickplace.robot.compose import load_robot
-    from pickplace.robot.registry import ROBOTS_DIR, bundled_robots
-
-    rows = []
-    for name in bundled_robots():
-        r = load_robot(name).robot
-        rows.append(
-            {
-                "name": r.name,
-                "joints": r.n_joints,
-                "gripper": r.gripper_kind,
-                "open_width_m": r.open_width,
-                "squeeze_force_n": r.squeeze_force,
-                "description": str(r.description.source.relative_to(ROBOTS_DIR.parent)),
-            }
-        )
-    return rows
-
-
 def _cmd_robots(args: argparse.Namespace, stop: InterruptHandler) -> int:
+    from pickplace.robot.listing import robot_rows
+
     rows = robot_rows()
     if args.json:
         _write_stdout(json.dumps({"robots": rows}))

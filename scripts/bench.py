@@ -13,9 +13,13 @@ Targets (figures, not tests):
 - trials/s per worker of the Ray backend (a local cluster) within 10 % of the process
   backend's on this machine, both in steady state (from the 10th result on); speed-up with 2
   workers >= 1.8; peak RSS of a 2,000-trial sweep (its process and its largest worker) and the
-  bytes a trial's record takes.
+  bytes a trial's record takes;
+- ``pickplace --help``, ``--version``, ``scenarios`` and ``robots`` each answer in <= 0.3 s
+  (median wall time of a fresh process, and its CPU time, which the machine's load does not
+  inflate; ``robots`` after its first call, which measures the robots once).
 
 Usage: python scripts/bench.py [--json] [--trials N] [--backend-trials N] [--rss-trials N]
+       python scripts/bench.py --cli-only [--json]
 """
 
 from __future__ import annotations
@@ -64,6 +68,13 @@ TARGETS = {
 }
 
 COMPOSE_TARGET_S = 1.0
+CLI_TARGET_S = 0.3
+CLI_COMMANDS = {
+    "help": ["--help"],
+    "version": ["--version"],
+    "scenarios": ["scenarios"],
+    "robots": ["robots"],
+}
 
 # The peak-RSS sweep runs in a process of its own, so that nothing of the benchmark's counts.
 RSS_SCRIPT = """
@@ -261,6 +272,27 @@ def compose_times() -> dict[str, float]:
     return out
 
 
+def cli_times(repeats: int = 7) -> dict[str, float]:
+    """Median wall and CPU time [s] of ``pickplace ARGS`` in a fresh process, per command."""
+    import resource
+
+    out: dict[str, float] = {}
+    cmd = [sys.executable, "-m", "pickplace.cli"]
+    subprocess.run([*cmd, "robots"], capture_output=True, check=True)  # measures once
+    for name, args in CLI_COMMANDS.items():
+        walls, cpus = [], []
+        for _ in range(repeats):
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t0 = time.perf_counter()
+            subprocess.run([*cmd, *args], capture_output=True, check=True)
+            walls.append(time.perf_counter() - t0)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+        out[f"cli_wall_s_{name}"] = statistics.median(walls)
+        out[f"cli_cpu_s_{name}"] = statistics.median(cpus)
+    return out
+
+
 def steady_rate(times: list[float], skip: int = 10) -> float:
     """Results per second from the ``skip``-th result to the last (start-up left out)."""
     k = min(skip, len(times) // 4)
@@ -320,8 +352,21 @@ def main(argv: list[str] | None = None) -> int:
         "--backend-trials", type=int, default=80, help="trials per backend measurement"
     )
     parser.add_argument("--rss-trials", type=int, default=2000, help="trials of the peak-RSS sweep")
+    parser.add_argument("--cli-only", action="store_true", help="only the CLI's answer times")
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
+    if args.cli_only:
+        report.update(cli_times())
+        checks = {
+            f"cli_wall_s_{n}": {
+                "target": f"<= {CLI_TARGET_S}",
+                "met": report[f"cli_wall_s_{n}"] <= CLI_TARGET_S,
+            }
+            for n in CLI_COMMANDS
+        }
+        report["targets"] = checks
+        print(json.dumps(report) if args.json else _table(report, checks))
+        return 0
 
     # Headless nominal runs, interleaved with recording runs so that both see the same load.
     headless, with_planning, recording, sizes = [], [], [], []
@@ -370,7 +415,10 @@ def main(argv: list[str] | None = None) -> int:
     report.update(peak_rss(min(args.rss_trials, 200)))
     report.update(peak_rss(args.rss_trials))
 
+    report.update(cli_times())
     goals = dict(TARGETS)
+    for name in CLI_COMMANDS:
+        goals[f"cli_wall_s_{name}"] = ("<=", CLI_TARGET_S)
     for name in bundled_robots():
         goals[f"robot_compose_calibrate_s_{name}"] = ("<=", COMPOSE_TARGET_S)
     checks = {}
@@ -379,17 +427,21 @@ def main(argv: list[str] | None = None) -> int:
         met = None if value is None else (value <= target if op == "<=" else value >= target)
         checks[key] = {"target": f"{op} {target}", "met": met}
     report["targets"] = checks
-    if args.json:
-        print(json.dumps(report))
-    else:
-        for key, value in report.items():
-            if key != "targets":
-                shown = f"{value:.4g}" if isinstance(value, float) else str(value)
-                print(f"{key:40s} {shown}")
-        for key, c in checks.items():
-            verdict = "not measured" if c["met"] is None else "met" if c["met"] else "MISSED"
-            print(f"target {key:33s} {c['target']:>8s}  {verdict}")
+    print(json.dumps(report) if args.json else _table(report, checks))
     return 0
+
+
+def _table(report: dict[str, Any], checks: dict[str, dict[str, Any]]) -> str:
+    """The report as lines of ``name value``, then each target and whether it was met."""
+    lines = []
+    for key, value in report.items():
+        if key != "targets":
+            shown = f"{value:.4g}" if isinstance(value, float) else str(value)
+            lines.append(f"{key:40s} {shown}")
+    for key, c in checks.items():
+        verdict = "not measured" if c["met"] is None else "met" if c["met"] else "MISSED"
+        lines.append(f"target {key:33s} {c['target']:>8s}  {verdict}")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

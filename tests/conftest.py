@@ -18,6 +18,13 @@ from pickplace.world.scene import Scene
 REPO = Path(__file__).resolve().parent.parent
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _own_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The suite's own cache folder (pickplace.robot.listing), never the user's; the CLI's
+    subprocesses inherit it."""
+    os.environ["PICKPLACE_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+
+
 @pytest.fixture(scope="session")
 def scene() -> Scene:
     """The default scene (do not mutate its model: faults need a fresh one)."""

@@ -6,6 +6,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import mujoco
+import numpy as np
 import pytest
 
 from pickplace.control.controllers import IK_STATUSES
@@ -152,3 +154,37 @@ def test_failure_reasons_are_the_documented_strings() -> None:
     documented = re.findall(r"^- `([a-z-]+)`:", section, flags=re.MULTILINE)
     assert sorted(documented) == sorted(r.value for r in FailureReason)
     assert str(FailureReason.NAN) == "nan"
+
+
+# ---------------------------------------------------------------------------- failure texts
+# Every failure text states the measured value, the limit and what it refers to (issue 25).
+
+
+def test_missed_grasp_text_gives_forces_with_the_digits_their_limit_needs() -> None:
+    text = checks.missed_grasp_text(0.0056, 0.025, 0.05, np.array([0.0, 2.3]), 0.3)
+    assert text.startswith("the fingers closed past the brick and a pad does not press firmly")
+    assert "finger gap 5.6 mm (need >= 25.0 mm, 50 % of the 50 mm brick)" in text
+    assert "pad forces 0.00 / 2.30 N (need > 0.30 N each)" in text
+    firm = checks.missed_grasp_text(0.049, 0.025, 0.05, np.array([3.0, 12.0]), 10.0)
+    assert firm.startswith("a pad does not press firmly: ")
+    assert "pad forces 3.0 / 12.0 N (need > 10.0 N each)" in firm
+
+
+def test_a_tilted_brick_in_the_target_bin_is_measured_against_its_limit(scene: Scene) -> None:
+    from pickplace.sim.checks import SuccessCriteria
+    from pickplace.sim.verdict import placement_problems
+
+    data = scene.make_data()
+    a = scene.brick_qpos_adr
+    c = scene.target_bin.center_W
+    half = scene.brick_half_extents
+    # On its side (90 deg about x), resting on the target bin's floor, still.
+    data.qpos[a : a + 3] = [c[0], c[1], scene.target_bin.floor_top_z + half[1]]
+    data.qpos[a + 3 : a + 7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]
+    data.qvel[:] = 0.0
+    mujoco.mj_forward(scene.model, data)
+    problems = placement_problems(scene, data, scene.target_bin, SuccessCriteria(), 0.0)
+    tilt = next(p for p in problems if "tilted" in p)
+    assert tilt == (
+        "the brick is tilted 90 deg from lying flat (its z axis from world z; limit 5 deg)"
+    )

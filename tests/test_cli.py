@@ -177,7 +177,7 @@ def test_an_unknown_robot_lists_the_bundled_ones(command: str, tmp_path: Path) -
     assert proc.returncode == 2
     assert proc.stderr.strip() == (
         "pickplace: error: --robot: unknown robot 'no-such-robot'; valid: iiwa14-wsg50, "
-        "panda-hand, ur5e-2f85 or a robot.toml path"
+        "panda-hand, ur5e-2f85, a robot.toml path or a folder holding one"
     )
     missing = tmp_path / "robot.toml"
     proc = run_cli(command, "--robot", str(missing))
@@ -198,8 +198,9 @@ def test_robots_are_listed_with_joints_gripper_width_force_and_file() -> None:
     assert "coupled by the loader" in rows["panda-hand"]["gripper"]
     assert rows["ur5e-2f85"]["gripper"].startswith("linkage")
     for name, r in rows.items():
-        assert r["description"] == f"robots/{name}/robot.toml"
-        assert (REPO / r["description"]).is_file()
+        # Absolute: right from any folder, so a user can find a bundled robot to copy.
+        assert r["description"] == str((REPO / "robots" / name / "robot.toml").resolve())
+        assert Path(r["description"]).is_absolute() and Path(r["description"]).is_file()
         assert r["open_width_m"] > 0.05  # wider than the brick
         assert r["squeeze_force_n"] > 10.0
     text = run_cli("robots")

@@ -375,3 +375,113 @@ def test_the_file_appears_only_when_the_run_ends(tmp_path: Path) -> None:
     assert seen and not any(seen)
     assert recorder.written == path
     assert "/summary" in RrdReader(path).store().schema().entity_paths()
+
+
+# ---------------------------------------------------------------------------- how it opens
+# A run's recording opens on the answer (issue 25): the verdict in view, the time cursor at the
+# failure tick or the end, plot axes fitted to the data, keyframe labels apart.
+
+
+def opening_blueprint(path: Path) -> dict[str, dict[str, Any]]:
+    """Entity path → {component: value} of the blueprint the file opens on: the one sent last
+    (make_active), told apart from the provisional one by its fitted plot axes."""
+    reader = RrdReader(path)
+    stores = []
+    for store in reader.blueprints():
+        parts: dict[str, dict[str, Any]] = defaultdict(dict)
+        for chunk in reader.store(store=store).stream():
+            batch = chunk.to_record_batch()
+            for name in batch.schema.names:
+                if ":" in name:
+                    parts[chunk.entity_path][name] = batch.column(name).to_pylist()[-1]
+        stores.append(dict(parts))
+    assert len(stores) == 2  # the provisional one (a live viewer's) and the final one
+    return max(stores, key=lambda s: sum(p.endswith("/ScalarAxis") for p in s))
+
+
+def view_named(bp: dict[str, dict[str, Any]], title: str) -> str:
+    return next(p for p, c in bp.items() if c.get("ViewBlueprint:display_name") == [title])
+
+
+def test_a_success_opens_on_its_verdict_at_the_end(recording: Recording) -> None:
+    (text,) = recording.entities["verdict"].static["TextDocument:text"]
+    assert text.startswith(f"**SUCCESS in {recording.result.sim_time_s:.2f} s")
+    assert "Brick placed" in text and "mm from its target" in text
+    bp = opening_blueprint(recording.path)
+    verdict = view_named(bp, "Verdict")
+    assert bp[verdict]["ViewBlueprint:space_origin"] == ["verdict"]
+    assert bp[verdict]["ViewBlueprint:class_identifier"] == ["TextDocument"]
+    panel = bp["/time_panel"]
+    assert panel["TimePanelBlueprint:play_state"] == [3]  # following: the end of the run
+    assert "TimePanelBlueprint:time_selection" not in panel
+
+
+def test_plot_axes_are_fitted_to_the_recorded_data(recording: Recording) -> None:
+    bp = opening_blueprint(recording.path)
+    sigma = view_named(bp, "Singular values σ of J [m/rad, -]")
+    ((lo, hi),) = bp[f"{sigma}/ScalarAxis"]["ScalarAxis:range"]
+    values = np.array(
+        recording.entities["plots/kinematics/singular_values"].rows["Scalars:scalars"]
+    )
+    assert lo == 0.0 and values.max() < hi <= 1.1 * values.max()
+    normalized = view_named(bp, "Joint position [0 lower … 1 upper limit]")
+    ((lo, hi),) = bp[f"{normalized}/ScalarAxis"]["ScalarAxis:range"]
+    assert lo <= 0.0 and hi >= 1.0  # the limit lines are inside
+
+
+def test_a_failure_opens_at_its_tick_with_its_reason_and_its_plot(tmp_path: Path) -> None:
+    from pickplace.run.runner import RunRequest, run
+
+    path = tmp_path / "missed.rrd"
+    result = run(RunRequest(scenario="fault-brick-moved", record=path))
+    assert str(result.failure) == "missed-grasp"
+    (text,) = read_entities(path)["verdict"].static["TextDocument:text"]
+    head = (
+        f"**FAILED: missed-grasp at t = {result.failure_time_s:.2f} s "
+        f"(tick {result.failure_tick})**"
+    )
+    assert text.startswith(head)
+    assert "finger gap" in text and "need >= 25.0 mm" in text
+    bp = opening_blueprint(path)
+    panel = bp["/time_panel"]
+    t_ns = round(result.failure_time_s * 1e9)
+    (selection,) = panel["TimePanelBlueprint:time_selection"]
+    assert selection["min"] == t_ns and t_ns < selection["max"] < t_ns + 10_000_000
+    assert panel["TimePanelBlueprint:loop_mode"] == [2]  # loop the selection
+    assert panel["TimePanelBlueprint:play_state"] == [2]  # playing (into the selection)
+    pad = view_named(bp, "Pad force [N]")
+    tabs = next(
+        c for c in bp.values() if c.get("ContainerBlueprint:display_name") == ["Gripper / IK"]
+    )
+    assert tabs["ContainerBlueprint:active_tab"] == [pad.lstrip("/")]
+
+
+def test_keyframe_labels_are_apart_in_the_opening_view(recording: Recording) -> None:
+    from pickplace.record.blueprint import (
+        LABEL_CHAR_PX,
+        LABEL_HEIGHT_PX,
+        LABEL_PAD_PX,
+        label_groups,
+        project_to_view,
+    )
+
+    ents = recording.entities
+    shown = [
+        (e.static["Points3D:labels"][0], e.static["Transform3D:translation"])
+        for p, e in ents.items()
+        if p.startswith("world/plan/keyframes/") and e.static.get("Points3D:show_labels") == [True]
+    ]
+    texts = [label for label, _ in shown]
+    assert "pre-pick / lift" in texts and "pick / settle / grip-closed" in texts
+    px = project_to_view(np.array([xyz for _, xyz in shown]))
+    widths = [LABEL_CHAR_PX * len(s) + LABEL_PAD_PX for s in texts]
+    for i in range(len(shown)):
+        for j in range(i):
+            dx, dy = np.abs(px[i] - px[j])
+            apart = dy >= LABEL_HEIGHT_PX or dx >= 0.5 * (widths[i] + widths[j])
+            assert apart, (texts[i], texts[j])
+    # Two keyframes at one place always share a label; two far apart never do.
+    groups = label_groups(
+        ["a", "b", "c"], np.array([[0.0, -0.5, 0.1], [0.0, -0.5, 0.1], [0.6, 0.0, 0.1]])
+    )
+    assert groups == [[0, 1], [2]]

@@ -16,9 +16,13 @@ from pickplace.sweep.bins import success_by_parameter
 from pickplace.sweep.recording import (
     CHART_HEIGHT,
     METRICS,
+    ONE_ROW_OF_COUNTS,
+    RATE_COLOR,
+    RATE_LOW_COLOR,
     SUCCESS_COLOR,
     bin_outline_W,
     outcome_colors,
+    rate_color,
     report_markdown,
     write_sweep_recording,
 )
@@ -167,6 +171,11 @@ def _bar_rates(ent: Entity) -> list[float]:
     return list(-top / CHART_HEIGHT)
 
 
+def _rgb(packed: int) -> tuple[int, int, int]:
+    """A Rerun colour (0xRRGGBBAA) as its red, green and blue bytes."""
+    return ((packed >> 24) & 255, (packed >> 16) & 255, (packed >> 8) & 255)
+
+
 def test_charts_show_the_success_rate_per_bin(synthetic: dict[str, Any]) -> None:
     ents = synthetic["entities"]
     by = success_by_parameter(synthetic["plan"], synthetic["draws"], synthetic["trials"], 4)
@@ -185,6 +194,19 @@ def test_charts_show_the_success_rate_per_bin(synthetic: dict[str, Any]) -> None
             assert s.rate is not None
             ends = sorted(-p[1] / CHART_HEIGHT for p in line)
             assert ends == pytest.approx([s.rate.low, s.rate.high], abs=1e-5)
+        # Bars are coloured by their rate (red 0 %, amber 50 %, green 100 %), not all green.
+        colors = ents[f"{base}/bars"].static["Boxes2D:colors"]
+        want = [rate_color(s.rate.rate) for s in filled if s.rate]
+        assert [_rgb(c) for c in colors] == [tuple(round(255 * v) for v in w) for w in want]
+        # Counts of neighbouring bars sit on alternate rows when there are many bars.
+        heights = [p[1] for p in ents[f"{base}/counts"].static["Points2D:positions"]]
+        if len(stats) > ONE_ROW_OF_COUNTS:
+            tops = [-(s.rate.high if s.rate else 0.0) * CHART_HEIGHT - 6.5 for s in stats]
+            assert [round(h - top, 6) for h, top in zip(heights, tops, strict=True)] == [
+                -7.0 * (k % 2) for k in range(len(stats))
+            ]
+    assert rate_color(0.0) == pytest.approx(RATE_LOW_COLOR)
+    assert rate_color(1.0) == pytest.approx(RATE_COLOR)
     mass = by["brick_mass"]
     assert mass[0].rate is not None and mass[0].rate.rate == 1.0  # light bricks succeed
     assert mass[-1].rate is not None and mass[-1].rate.rate == 0.0  # heavy ones are dropped

@@ -83,7 +83,14 @@ from pickplace.record.archetypes import (
     transform_columns,
     xyzw,
 )
-from pickplace.record.blueprint import LIMIT_LINES, PLOTS, build_blueprint
+from pickplace.record.blueprint import (
+    LIMIT_LINES,
+    PLOTS,
+    RunVerdict,
+    build_blueprint,
+    label_groups,
+    y_range_of,
+)
 from pickplace.record.rrd_file import read_back_problem
 from pickplace.record.viewer import FINISH_TIMEOUT_S, ViewerRelay, parse_viewer_url, spawn_viewer
 from pickplace.signals import deferred_interrupts
@@ -100,7 +107,6 @@ SPAWN_PORT = 9876
 ELLIPSOID_SCALE = 0.1  # half sizes of the manipulability ellipsoid = this · σt [m per m/rad]
 ENCODE_TIMEOUT_S = 30.0  # bound on encoding what was logged (normally milliseconds) [s]
 VIEWER_FINISH_AFTER_INTERRUPT_S = 1.0  # time a viewer gets for the rest after Ctrl-C [s]
-KEYFRAME_MERGE_DISTANCE = 0.01  # keyframes closer than this share one label [m]
 
 TOOL_AXES = {"planned": 0.12, "commanded": 0.09, "actual": 0.06}
 LEVELS = {
@@ -108,6 +114,31 @@ LEVELS = {
     "warn": rr.TextLogLevel.WARN,
     "error": rr.TextLogLevel.ERROR,
 }
+
+
+def run_verdict(result: RunResult, dt: float) -> RunVerdict:
+    """The verdict a recording opens on, from the run's result.
+
+    Args:
+        result: The finished run.
+        dt: Control period [s].
+    """
+    if result.success:
+        s = result.summary()
+        place = s.get("place_error_m")
+        text = (
+            (f"Brick placed {place * 1000:.1f} mm from its target; " if place is not None else "")
+            + f"max tool position error {s['max_position_error_m'] * 1000:.1f} mm, max joint "
+            f"speed / limit {s['max_joint_speed_ratio']:.3f}, min singular value "
+            f"{s['min_singular_value']:.3f}."
+        )
+        return RunVerdict(True, None, text, result.ticks, result.sim_time_s, dt)
+    text = result.failure_text or str(result.failure)
+    reason = str(result.failure)
+    text = text.removeprefix(f"{reason}: ")
+    tick = result.failure_tick if result.failure_tick is not None else result.ticks
+    t = result.failure_time_s if result.failure_time_s is not None else result.sim_time_s
+    return RunVerdict(False, reason, text, tick, t, dt)
 
 
 # ---------------------------------------------------------------------------- the plots
@@ -406,11 +437,37 @@ class Recorder:
                 level = "info" if result.success else "error"
                 self._log_event(result.ticks, result.sim_time_s, level, f"verdict: {verdict}")
                 self._verdict_logged = True
+            self._log_verdict(run, result)
             self._finish(run, interrupted=str(result.failure) == "interrupted")
             self._finished = True
         finally:
             if not self._finished:
                 self._discard()
+
+    # ------------------------------------------------------------------ the answer
+
+    def _log_verdict(self, run: Simulation, result: RunResult) -> None:
+        """The verdict panel's text and the blueprint the file opens on (cursor at the failure
+        tick or the end, axes fitted to the data), sent after everything else so that it is
+        the one a viewer makes active."""
+        verdict = run_verdict(result, run.dt)
+        self.rec.log(
+            "verdict",
+            rr.TextDocument(verdict.markdown(), media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+        last = min(int(run.ticks), len(run.log.t))
+        ranges = {}
+        if last > 0:
+            rows = slice(0, last)
+            for plot in PLOTS:
+                limits = [] if plot.limits is None else plot.limits.values(run.scene)
+                fitted = y_range_of(plot.values(run.log, rows), np.ravel(limits).tolist())
+                if fitted is not None:
+                    ranges[plot.path] = fitted
+        self.rec.send_blueprint(
+            build_blueprint(verdict, ranges), make_active=True, make_default=True
+        )
 
     # ------------------------------------------------------------------ static content
 
@@ -460,20 +517,17 @@ class Recorder:
             rr.LineStrips3D([path], colors=[[0.1, 0.75, 0.95]], radii=[0.003]),
             static=True,
         )
-        # Keyframes at one position (pick, settle, grip-closed) would print their labels on top
-        # of each other: the first of such a group shows all the names, the others none.
+        # Keyframes whose labels would overlap in the opening view (pick, settle, grip-closed
+        # at one position; pre-pick under lift) share one label: the first of a group shows
+        # all the names, the others none (blueprint.label_groups).
         names: list[str] = []
         for i, kf in enumerate(traj.keyframes):
             names.append(kf.name if kf.name not in names else f"{kf.name}-{i}")
         poses = [np.asarray(kf.X_WG.wxyz_xyz) for kf in traj.keyframes]
-        leader = list(range(len(poses)))
-        for i in range(len(poses)):
-            for j in range(i):
-                if np.linalg.norm(poses[i][4:] - poses[j][4:]) < KEYFRAME_MERGE_DISTANCE:
-                    leader[i] = leader[j]
-                    break
+        groups = label_groups(names, np.array([p[4:] for p in poses]))
+        leader = {g[0]: g for g in groups}
         for i, (name, wxyz_xyz) in enumerate(zip(names, poses, strict=True)):
-            group = [names[j] for j in range(len(names)) if leader[j] == i]
+            group = [names[j] for j in leader.get(i, [])]
             rec.log(
                 f"world/plan/keyframes/{path_part(name)}",
                 rr.Transform3D(translation=wxyz_xyz[4:], quaternion=quat(wxyz_xyz[:4])),

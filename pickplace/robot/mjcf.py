@@ -27,10 +27,12 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-
-import mujoco
+from typing import TYPE_CHECKING
 
 from pickplace.errors import RobotError, SceneError
+
+if TYPE_CHECKING:
+    import mujoco
 
 _MESH_DIR_ASSETS = ("mesh", "hfield", "skin")
 """Asset tags whose files MuJoCo looks for in ``meshdir``."""
@@ -74,6 +76,8 @@ class Part:
 
     def new_spec(self) -> mujoco.MjSpec:
         """A fresh spec of the sanitised document (specs are mutable; make one per use)."""
+        import mujoco  # here, not at the top: digests need no MuJoCo (pickplace robots)
+
         return mujoco.MjSpec.from_string(self.xml)
 
     def error(self, problem: str) -> RobotError:
@@ -254,6 +258,8 @@ def _strip_scene_parts(root: ET.Element) -> list[str]:
 def _parse_with_repairs(
     root: ET.Element, source: Path, field: str
 ) -> tuple[str, mujoco.MjSpec, list[str]]:
+    import mujoco
+
     repairs: list[str] = []
     for _ in range(_MAX_REPAIRS):
         xml = ET.tostring(root, encoding="unicode")
@@ -408,6 +414,8 @@ def parse_world(path: Path) -> mujoco.MjSpec:
 
     The one parser of world files: the composition, the loader and the run use it.
     """
+    import mujoco
+
     path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
     if not path.exists():
         raise SceneError(f"scene file '{path}' does not exist; valid: an MJCF world file")

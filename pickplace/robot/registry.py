@@ -7,6 +7,7 @@ import hashlib
 from pathlib import Path
 
 from pickplace.errors import RobotError
+from pickplace.robot import DEFAULT_ROBOT  # re-exported: where robots come from names it
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.mjcf import part_digest
 
@@ -32,19 +33,18 @@ ROBOTS_DIR = _robots_dir()
 DEFAULT_WORLD = _world_path()
 
 
-DEFAULT_ROBOT = "iiwa14-wsg50"
-
-
 def bundled_robots() -> list[str]:
     """Names of the robots shipped in ``robots/`` (folders holding a ``robot.toml``)."""
     return sorted(p.parent.name for p in ROBOTS_DIR.glob("*/robot.toml"))
 
 
 def resolve_description(robot: str | Path | RobotDescription) -> RobotDescription:
-    """A description from a bundled robot's name, a ``.toml`` path, or itself.
+    """A description from a bundled robot's name, a ``.toml`` path, a folder holding a
+    ``robot.toml`` (a bundled robot's copy, ``robots/panda-hand``), or itself.
 
     Raises:
-        RobotError: The name is not bundled and no such file exists (lists the bundled names).
+        RobotError: The name is not bundled and no such file exists (lists the bundled names),
+            or the folder holds no ``robot.toml``.
     """
     if isinstance(robot, RobotDescription):
         return robot
@@ -52,10 +52,19 @@ def resolve_description(robot: str | Path | RobotDescription) -> RobotDescriptio
     if text in bundled_robots():
         return RobotDescription.from_toml(ROBOTS_DIR / text / "robot.toml")
     path = Path(text)
+    if path.is_dir():
+        toml = path / "robot.toml"
+        if not toml.is_file():
+            raise RobotError(
+                f"robot folder '{path}' holds no robot.toml; valid: {', '.join(bundled_robots())}, "
+                "a robot.toml path or a folder holding one"
+            )
+        return RobotDescription.from_toml(toml)
     if path.suffix == ".toml" or path.exists():
         return RobotDescription.from_toml(path)
     raise RobotError(
-        f"unknown robot '{text}'; valid: {', '.join(bundled_robots())} or a robot.toml path"
+        f"unknown robot '{text}'; valid: {', '.join(bundled_robots())}, a robot.toml path or a "
+        "folder holding one"
     )
 
 
@@ -74,3 +83,13 @@ def description_digest(desc: RobotDescription) -> str:
     ):
         digest.update(part_digest(mjcf, field_name, angle, desc.source).encode())
     return digest.hexdigest()
+
+
+__all__ = [
+    "DEFAULT_ROBOT",
+    "DEFAULT_WORLD",
+    "ROBOTS_DIR",
+    "bundled_robots",
+    "description_digest",
+    "resolve_description",
+]

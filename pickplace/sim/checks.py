@@ -236,7 +236,10 @@ class PositionLimitCheck(Check):
         k = first_tick(log.limit_violation[k0:k1] > self.tolerance, k0)
         if k is None:
             return None
-        text = f"a joint is {log.limit_violation[k]:.4f} rad past its limit at t={log.t[k]:.3f} s"
+        text = (
+            f"a joint is {log.limit_violation[k]:.4f} rad past its range at t={log.t[k]:.3f} s "
+            f"(tolerance {self.tolerance:.4f} rad)"
+        )
         return Failure(k, FailureReason.LIMIT_VIOLATED, text)
 
 
@@ -261,8 +264,44 @@ class CollisionCheck(Check):
         for contact in scene.robot_world_contacts(scene.model, log.restore(k, self.data)):
             pair = f"{scene.geom_name(contact.geom)} touched {scene.geom_name(contact.other)}"
             break
-        text = f"{pair} with {log.robot_world_force[k]:.1f} N at t={log.t[k]:.3f} s"
+        text = (
+            f"{pair} with {log.robot_world_force[k]:.1f} N at t={log.t[k]:.3f} s (no "
+            "robot–world contact is allowed)"
+        )
         return Failure(k, FailureReason.COLLISION, text)
+
+
+def _newtons(value: float, limit: float) -> str:
+    """A force with the digits its limit needs: 0.3 N is not rounded to 0."""
+    digits = 1 if limit >= 1.0 else 2
+    return f"{value:.{digits}f}"
+
+
+def missed_grasp_text(
+    gap: float, min_gap: float, brick_width: float, forces: np.ndarray, firm_force: float
+) -> str:
+    """What a closed grip measured against what a grasp needs, naming what fell short.
+
+    Args:
+        gap: Finger gap after closing [m].
+        min_gap: Smallest gap of a grasp (a fraction of the brick's width) [m].
+        brick_width: The brick's width across the fingers [m].
+        forces: Normal force of each pad side on the brick [N].
+        firm_force: Force each side must exceed [N].
+    """
+    short = []
+    if gap < min_gap:
+        short.append("the fingers closed past the brick")
+    if not (forces > firm_force).all():
+        short.append("a pad does not press firmly")
+    f = " / ".join(_newtons(float(v), firm_force) for v in forces)
+    return (
+        f"{' and '.join(short) or 'the grip did not close on the brick'}: finger gap "
+        f"{gap * 1000:.1f} mm (need >= {min_gap * 1000:.1f} mm, "
+        f"{100 * min_gap / brick_width:.0f} % of the {brick_width * 1000:.0f} mm brick), pad "
+        f"forces {f} N (need > "
+        f"{_newtons(firm_force, firm_force)} N each)"
+    )
 
 
 class GraspState(enum.Enum):
@@ -336,10 +375,12 @@ class GraspMonitor(Check):
                     gap < cr.grasp_gap_fraction * self.brick_width
                     or not (f > self.firm_force).all()
                 ):
-                    text = (
-                        f"after closing the finger gap is {gap * 1000:.1f} mm (brick "
-                        f"{self.brick_width * 1000:.0f} mm) and pad forces are {f[0]:.1f} / "
-                        f"{f[1]:.1f} N (need > {self.firm_force:.0f} N each)"
+                    text = missed_grasp_text(
+                        gap,
+                        cr.grasp_gap_fraction * self.brick_width,
+                        self.brick_width,
+                        f,
+                        self.firm_force,
                     )
                     failure = Failure(k, FailureReason.MISSED_GRASP, text)
                     self.state = GraspState.RELEASED
@@ -363,9 +404,10 @@ class GraspMonitor(Check):
             )
             if t < t_place - 1e-9 and (s > cr.drop_slip or lost):
                 why = (
-                    f"it moved {s * 1000:.0f} mm in the gripper frame"
+                    f"it moved {s * 1000:.0f} mm in the gripper frame since the grasp "
+                    f"(limit {cr.drop_slip * 1000:.0f} mm)"
                     if s > cr.drop_slip
-                    else f"no pad contact for {cr.drop_contact_loss:.2f} s"
+                    else f"no pad touched it for {cr.drop_contact_loss:.2f} s (the limit)"
                 )
                 emit(
                     EventKind.DROP,
@@ -375,7 +417,7 @@ class GraspMonitor(Check):
                 )
                 if failure is None:
                     failure = Failure(
-                        k, FailureReason.DROPPED, f"brick left the gripper at t={t:.3f} s ({why})"
+                        k, FailureReason.DROPPED, f"brick left the gripper at t={t:.3f} s: {why}"
                     )
                 self.state = GraspState.RELEASED
             elif t >= t_release - 1e-9:

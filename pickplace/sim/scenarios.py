@@ -3,10 +3,10 @@
 ``pickplace scenarios`` lists them; ``pickplace run --scenario NAME`` runs one; the pytest suite
 runs every scenario and checks its documented outcome (:attr:`Scenario.expected`).
 
-To add a scenario: a builder function here and a :class:`Scenario` row in :data:`SCENARIOS`
-(with its expected outcome per controller), and its row in the scenario tables of README.md and
-docs/scenarios.md (``tests/test_docs.py`` checks that both state its outcomes); the parametrised
-test picks it up.
+To add a scenario: a row in :data:`~pickplace.sim.catalog.CATALOG` (its summary and expected
+outcome per controller), a builder function here in :data:`BUILDERS`, and its row in the
+scenario tables of README.md and docs/scenarios.md (``tests/test_docs.py`` checks that both
+state its outcomes); the parametrised test picks it up.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from pickplace.planning.planner import PickPlacePlanner
 from pickplace.planning.timing import TimingConfig
 from pickplace.planning.trajectory import PoseTrajectory
 from pickplace.sim import faults
+from pickplace.sim.catalog import CATALOG
 from pickplace.sim.goals import PlaceGoal, ReachGoal
 from pickplace.sim.task import Fault, Task
 from pickplace.world.placements import (
@@ -310,71 +311,31 @@ def _unreachable(req: BuildRequest) -> Task:
     return pick_place_task(req, placement, goal=goal, preflight=False)
 
 
+# The builder of each scenario of the catalogue (pickplace.sim.catalog), by name.
+BUILDERS: dict[str, Builder] = {
+    "pick-place": _nominal,
+    "pick-place-random": _random,
+    "singular-reach": _reach,
+    "fault-gripper-disabled": _with_fault(faults.GripperDisabled),
+    "fault-brick-moved": _with_fault(faults.BrickMoved),
+    "fault-heavy-brick": _with_fault(faults.HeavyBrick),
+    "fault-knock": _with_fault(faults.Knock),
+    "fault-unreachable": _unreachable,
+    "fault-nan": _with_fault(faults.InjectNaN),
+    "fault-obstacle": _with_fault(faults.Obstacle),
+}
+
 SCENARIOS: dict[str, Scenario] = {
-    s.name: s
-    for s in (
-        Scenario(
-            "pick-place", "nominal pick from bin 1's centre, place at bin 2's centre", _nominal
-        ),
-        Scenario(
-            "pick-place-random",
-            "brick x, y, yaw drawn from the seed over bin 1's floor (drawn again until the "
-            "planner finds a feasible plan)",
-            _random,
-            random=True,
-        ),
-        Scenario(
-            "singular-reach",
-            "tool pulled along a straight line past full arm stretch "
-            "and back (qp stays within limits, pinv does not)",
-            _reach,
-            expected_with={"pinv": "limit-violated", "dls": "limit-violated"},
-            uses_brick=False,
-        ),
-        Scenario(
-            "fault-gripper-disabled",
-            "the gripper's actuators have no force -> missed-grasp",
-            _with_fault(faults.GripperDisabled),
-            expected="missed-grasp",
-        ),
-        Scenario(
-            "fault-brick-moved",
-            "the brick is moved 8 cm after planning -> missed-grasp",
-            _with_fault(faults.BrickMoved),
-            expected="missed-grasp",
-        ),
-        Scenario(
-            "fault-heavy-brick",
-            "the brick weighs 30 kg, more than friction at the pads holds -> dropped",
-            _with_fault(faults.HeavyBrick),
-            expected="dropped",
-        ),
-        Scenario(
-            "fault-knock",
-            "an impulse knocks the brick out of the gripper mid-transport -> dropped",
-            _with_fault(faults.Knock),
-            expected="dropped",
-        ),
-        Scenario(
-            "fault-unreachable",
-            "place target 1.6 m away, outside the arm's reach, executed without the "
-            "pre-flight -> ik-failed",
-            _unreachable,
-            expected="ik-failed",
-        ),
-        Scenario(
-            "fault-nan",
-            "a NaN is injected into the brick's velocity mid-run -> nan",
-            _with_fault(faults.InjectNaN),
-            expected="nan",
-        ),
-        Scenario(
-            "fault-obstacle",
-            "after planning, a box appears in the transfer path -> collision",
-            _with_fault(faults.Obstacle),
-            expected="collision",
-        ),
+    name: Scenario(
+        info.name,
+        info.summary,
+        BUILDERS[name],
+        info.expected,
+        info.expected_with,
+        info.uses_brick,
+        info.random,
     )
+    for name, info in CATALOG.items()
 }
 
 

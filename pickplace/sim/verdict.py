@@ -73,23 +73,40 @@ def placement_problems(
     corners_W = transform_points(X_WO, box_corners(scene.brick_half_extents))
     problems: list[str] = []
     if not bin_.contains_xy(corners_W):
-        problems.append(f"footprint not inside {bin_.name}'s inner walls")
+        c = X_WO.translation()
+        problems.append(
+            f"the brick's footprint (centre at x={c[0]:.3f}, y={c[1]:.3f} m) is not inside "
+            f"{bin_.name}'s inner walls"
+        )
     lowest = float(corners_W[:, 2].min())
     if abs(lowest - bin_.floor_top_z) > criteria.floor_tolerance:
         problems.append(
-            f"lowest corner at z={lowest:.3f} m, {bin_.name} floor at z={bin_.floor_top_z:.3f} m"
+            f"the brick's lowest corner is at z={lowest:.3f} m, {bin_.name}'s floor at "
+            f"z={bin_.floor_top_z:.3f} m (tolerance {criteria.floor_tolerance * 1000:.0f} mm)"
         )
     z_O = X_WO.rotation().as_matrix()[:, 2]
     tilt = float(np.arccos(np.clip(z_O[2], -1.0, 1.0)))
     if tilt > criteria.max_tilt:
-        problems.append(f"tilted {np.rad2deg(tilt):.0f} deg")
+        problems.append(
+            f"the brick is tilted {np.rad2deg(tilt):.0f} deg from lying flat (its z axis from "
+            f"world z; limit {np.rad2deg(criteria.max_tilt):.0f} deg)"
+        )
     if not brick_at_rest(scene, data, criteria):
-        problems.append("still moving")
+        a = scene.brick_dof_adr
+        v = data.qvel[a : a + 6]
+        problems.append(
+            f"the brick still moves at {np.linalg.norm(v[:3]):.3f} m/s, "
+            f"{np.linalg.norm(v[3:]):.2f} rad/s (at rest below {criteria.rest_speed:g} m/s, "
+            f"{criteria.rest_angular_speed:g} rad/s)"
+        )
     if brick_touches_robot(scene, data):
-        problems.append("still touching the gripper")
+        problems.append("the brick still touches the gripper")
     gap = scene.robot.gap(data)
     if gap < grasp_width:
-        problems.append(f"gripper not open (gap {gap * 1000:.0f} mm)")
+        problems.append(
+            f"the gripper is not open: gap {gap * 1000:.1f} mm (need >= {grasp_width * 1000:.1f}"
+            " mm, the brick's width between the fingers)"
+        )
     return problems
 
 

@@ -93,7 +93,9 @@ FAILURE_COLORS = {
 EXTRA_COLORS = [(0.89, 0.47, 0.76), (0.74, 0.74, 0.13), (0.09, 0.75, 0.81)]
 BIN_FLOOR_COLOR = (0.55, 0.42, 0.30, 0.35)
 BIN_WALL_COLOR = (0.35, 0.27, 0.20)
-RATE_COLOR = (0.17, 0.63, 0.17)
+RATE_COLOR = (0.17, 0.63, 0.17)  # a bar at 100 %
+RATE_MID_COLOR = (0.93, 0.67, 0.10)  # at 50 %
+RATE_LOW_COLOR = (0.84, 0.15, 0.16)  # at 0 %
 ENCODE_TIMEOUT_S = 30.0  # bound on encoding what was logged (normally milliseconds) [s]
 # Trial labels are shown when at most this many failed trials are drawn (else on hover only).
 MAX_SHOWN_LABELS = 15
@@ -244,11 +246,27 @@ def _log_legend(
 # y = -CHART_HEIGHT.
 CHART_WIDTH = 100.0
 CHART_HEIGHT = 60.0
-CHART_BOUNDS = ((-13.0, 104.0), (-CHART_HEIGHT - 10.0, 15.0))
+CHART_BOUNDS = ((-13.0, 104.0), (-CHART_HEIGHT - 17.0, 15.0))  # room for two rows of counts
 AXIS_COLOR = (0.75, 0.75, 0.75)
 GRID_COLOR = (0.25, 0.25, 0.25)
 WHISKER_COLOR = (0.95, 0.95, 0.95)
 EMPTY_COLOR = (0.5, 0.5, 0.5)
+
+
+def rate_color(rate: float) -> tuple[float, float, float]:
+    """A bar's colour by its success rate in [0, 1]: red at 0, amber at 0.5, green at 1."""
+    r = min(max(float(rate), 0.0), 1.0)
+    a, b, u = (
+        (RATE_LOW_COLOR, RATE_MID_COLOR, 2 * r)
+        if r < 0.5
+        else (RATE_MID_COLOR, RATE_COLOR, 2 * r - 1)
+    )
+    return (a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1]), a[2] + u * (b[2] - a[2]))
+
+
+# With more bins than this, the count labels above the bars take two rows, alternately, so
+# that neighbours never collide.
+ONE_ROW_OF_COUNTS = 6
 
 
 def _chart_slots(stats: Sequence[BinStat]) -> list[tuple[float, float]]:
@@ -361,7 +379,7 @@ def _log_bins(rec: rr.RecordingStream, spec: VarySpec, stats: Sequence[BinStat],
                 mins=mins,
                 sizes=sizes,
                 radii=radii,
-                colors=[RATE_COLOR],
+                colors=[rate_color(r.rate) for _, r, _ in filled],
                 labels=[_bin_text(s, r, unit) for s, r, _ in filled],
                 show_labels=False,
                 draw_order=1.0,
@@ -383,8 +401,13 @@ def _log_bins(rec: rr.RecordingStream, spec: VarySpec, stats: Sequence[BinStat],
         f"{base}/counts",
         rr.Points2D(
             [
-                [x + 0.5 * w, -100.0 * (s.rate.high if s.rate else 0.0) * y - 6.5]
-                for s, (x, w) in zip(stats, slots, strict=True)
+                [
+                    x + 0.5 * w,
+                    -100.0 * (s.rate.high if s.rate else 0.0) * y
+                    - 6.5
+                    - 7.0 * (k % 2 if len(stats) > ONE_ROW_OF_COUNTS else 0),
+                ]
+                for k, (s, (x, w)) in enumerate(zip(stats, slots, strict=True))
             ],
             radii=[0.01],
             colors=[AXIS_COLOR if s.rate else EMPTY_COLOR for s in stats],

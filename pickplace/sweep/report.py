@@ -329,12 +329,19 @@ def sweep_title(report: Mapping[str, Any]) -> str:
 def report_text(report: Mapping[str, Any]) -> str:
     """The report for a person, in lines of plain text."""
     rate = report["trials_per_second"]
-    head = (
-        f"{sweep_title(report)}: {report['successes']}/{report['completed']} "
-        f"succeeded, {_interval(report['success_interval'])}"
-    )
-    if report["completed"] < report["runs"]:
-        head += f" of {report['runs']} requested"
+    compare = report.get("compare")
+    if compare is None:
+        head = (
+            f"{sweep_title(report)}: {report['successes']}/{report['completed']} "
+            f"succeeded, {_interval(report['success_interval'])}"
+        )
+        if report["completed"] < report["runs"]:
+            head += f" of {report['runs']} requested"
+    else:  # each seed ran once per arm: count seeds, and give each arm its own rate below
+        arms = len(compare["arms"])
+        head = f"{sweep_title(report)}: {report['trials']} seeds × {arms} arms ({compare['key']})"
+        if report["completed"] < report["runs"]:
+            head += f", {report['completed']} of {report['runs']} runs finished"
     head += f"; {report['backend']} backend, {report['workers']} worker(s)"
     if rate is not None:
         head += f", {rate:.2f} trials/s"
@@ -343,13 +350,13 @@ def report_text(report: Mapping[str, Any]) -> str:
         lines.append("  interrupted: the trials not finished are left out")
     units = {p["name"]: p["unit"] for p in report["vary"]["parameters"]}
     lines.append(f"  varied: {report['vary_text']}")
-    compare = report.get("compare")
+    recording = [f"  recording: {report['recording']}"] if report.get("recording") else []
     if compare is None:
         lines += _outcome_lines(report, units, "  ")
-        return "\n".join(lines)
+        return "\n".join(lines + recording)
     for label, arm in compare["arms"].items():
         rate = _interval(arm["success_interval"])
-        lines.append(f"  {label}: {arm['successes']}/{arm['completed']}, {rate}")
+        lines.append(f"  {label}: {arm['successes']}/{arm['completed']} seeds succeeded, {rate}")
         lines += _outcome_lines(arm, units, "    ")
     for p in compare["paired"]:
         lines.append(
@@ -360,7 +367,7 @@ def report_text(report: Mapping[str, Any]) -> str:
         )
     if compare["paired"]:
         lines.append(f"  interval: {compare['paired_method']}")
-    return "\n".join(lines)
+    return "\n".join(lines + recording)
 
 
 __all__ = [
