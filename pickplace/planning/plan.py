@@ -292,7 +292,7 @@ def swung_pose(X_WG: SE3, p_W_to: np.ndarray, p_W_base: np.ndarray | None) -> SE
     """
     if p_W_base is None:
         return X_WG
-    swing = _swing(X_WG.translation(), p_W_to, p_W_base)
+    swing = base_swing(X_WG.translation(), p_W_to, p_W_base)
     return SE3.from_rotation(SO3.from_z_radians(swing)) @ X_WG
 
 
@@ -303,7 +303,7 @@ VIA_ORIENTATIONS = ("swing", "shortest")
 _VERTICAL_AXIS_TOL = 1e-9
 
 
-def _swing(p_W_from: np.ndarray, p_W_to: np.ndarray, p_W_base: np.ndarray) -> float:
+def base_swing(p_W_from: np.ndarray, p_W_to: np.ndarray, p_W_base: np.ndarray) -> float:
     """Azimuth change about the base's vertical axis from one point to another [rad]."""
     a, b = p_W_from[:2] - p_W_base[:2], np.asarray(p_W_to)[:2] - p_W_base[:2]
     return wrap_angle(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]))
@@ -409,7 +409,7 @@ def plan_pick_place(
     R_lift, R_pre_place = X_WG_lift.rotation(), X_WG_pre_place.rotation()
     R_clearance = slerp(R_lift, R_pre_place, 0.5)
     if via == "swing" and base is not None:
-        R_clearance = _swing_halfway(R_lift, R_pre_place, _swing(p_lift, p_pre_place, base))
+        R_clearance = _swing_halfway(R_lift, R_pre_place, base_swing(p_lift, p_pre_place, base))
     X_WG_clearance = SE3.from_rotation_and_translation(R_clearance, p_clearance)
 
     w_open, w_closed = config.open_width, config.closed_width
