@@ -33,6 +33,7 @@ from pickplace.world.placements import (
     nominal_placement,
     random_placement,
     target_placement,
+    uniform_placement,
 )
 from pickplace.world.scene import Scene
 
@@ -287,6 +288,16 @@ def _random(req: BuildRequest) -> Task:
     )
 
 
+def _uniform(req: BuildRequest) -> Task:
+    """A brick pose drawn from the seed uniformly over bin 1's valid poses
+    (:func:`~pickplace.world.placements.uniform_placement`) and planned as drawn, never drawn
+    again: where no candidate is feasible the run ends ``no-feasible-plan`` before any physics,
+    naming the best candidate's first problem. A given ``--brick`` is planned as is.
+    """
+    rng = np.random.default_rng(req.seed)
+    return pick_place_task(req, req.brick or uniform_placement(req.scene, rng))
+
+
 def _reach(req: BuildRequest) -> Task:
     return singular_reach_task(req)
 
@@ -319,6 +330,14 @@ SCENARIOS: dict[str, Scenario] = {
             "brick x, y, yaw drawn from the seed over bin 1's floor (drawn again until the "
             "planner finds a feasible plan)",
             _random,
+            random=True,
+        ),
+        Scenario(
+            "pick-place-uniform",
+            "brick x, y, yaw drawn from the seed uniformly over bin 1's valid poses and never "
+            "drawn again: measures how much of the bin is picked (success where a candidate is "
+            "feasible; else no-feasible-plan, naming the best candidate's problem)",
+            _uniform,
             random=True,
         ),
         Scenario(
