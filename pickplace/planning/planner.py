@@ -352,7 +352,7 @@ class PickPlacePlanner:
         t = plan.phases.approach[1] if plan.phases is not None else 0.0
         p = plan.trajectory.sample(t)[0][4:]  # wxyz_xyz of the tool at the pick
         point = (float(p[0]), float(p[1]), float(p[2]))
-        kind = "collision" if "footprint" in (ranked.problem or "") else "ik"
+        kind = "ik" if (ranked.problem or "").startswith("unreachable") else "collision"
         problem = Problem(t, kind, ranked.problem or "", point)
         nq = self.scene.robot.n_joints
         return PreflightResult(
@@ -434,8 +434,8 @@ class PickPlacePlanner:
             problem = None
             if far[i] > self.reach:
                 problem = (
-                    f"the tool is {far[i]:.3f} m from the arm's first joint, beyond its reach "
-                    f"{self.reach:.3f} m"
+                    f"unreachable: the tool is {far[i]:.3f} m from the arm's first joint, beyond "
+                    f"its reach {self.reach:.3f} m (the sum of its link lengths)"
                 )
             elif near[i] < clearance:
                 problem = "footprint"  # worded below, for the best-ranked only
