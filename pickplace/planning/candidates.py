@@ -25,7 +25,7 @@ about the pad axis. The wrist's margin needs the arm, and is the planner's
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import mujoco
@@ -214,7 +214,7 @@ class HandFootprint:
         names: list[str],
         tool_site_id: int,
         gripper_qpos_adr: np.ndarray,
-        qpos_for_width: object,
+        qpos_for_width: Callable[[float], np.ndarray],
         q_arm: tuple[np.ndarray, np.ndarray],
     ) -> None:
         self.model = model
@@ -234,7 +234,7 @@ class HandFootprint:
         if cached is not None:
             return cached
         m, d = self.model, self.data
-        d.qpos[self.gripper_qpos_adr] = self.qpos_for_width(width)  # type: ignore[operator]
+        d.qpos[self.gripper_qpos_adr] = self.qpos_for_width(width)
         mujoco.mj_kinematics(m, d)
         R_WG = d.site_xmat[self.tool_site_id].reshape(3, 3)
         p_WG = d.site_xpos[self.tool_site_id]
