@@ -8,7 +8,8 @@ by tests that need no IK, in this order:
 
 1. reach: the tool at the pick and the place within the arm's reach (the sum of its link
    lengths from the first joint's anchor);
-2. the open hand's footprint: its collision boxes at the pick (and at the place) inside the bin's
+2. the open hand's footprint: its collision boxes at the pick (opened to the grasp's width) and at
+   the place (opened to the whole opening the release ramps to) inside the bin's
    inner walls and above its floor by the pre-flight's clearance
    (:class:`~pickplace.planning.candidates.HandFootprint`);
 3. the wrist's margin: the last joint's angle at the pick and after the transfer, predicted from
@@ -400,12 +401,16 @@ class PickPlacePlanner:
         )
         # The open hand in each bin, per open width.
         near = np.full(n, np.inf)
+        # The hand opens to the grasp's width at the pick, to the whole opening at the release.
         for width in np.unique(self._open_widths):
             sel = self._open_widths == width
-            for R, p, bin_ in ((R_pick, p_pick, sc.source_bin), (R_place, p_place, sc.target_bin)):
+            for R, p, bin_, w in (
+                (R_pick, p_pick, sc.source_bin, width),
+                (R_place, p_place, sc.target_bin, self.config.open_width),
+            ):
                 R_BW, p_BW = self._bin_frames[bin_.name]
                 d, _, _ = self.hand.distances(
-                    np.einsum("ij,njk->nik", R_BW, R[sel]), p[sel] @ R_BW.T + p_BW, width, bin_
+                    np.einsum("ij,njk->nik", R_BW, R[sel]), p[sel] @ R_BW.T + p_BW, w, bin_
                 )
                 near[sel] = np.minimum(near[sel], d)
         # The wrist: the tool's yaw changes, less what the base swing carries along, are the
@@ -461,10 +466,11 @@ class PickPlacePlanner:
             ("pick", X_WG_pick, self.scene.source_bin),
             ("place", X_WG_place, self.scene.target_bin),
         ):
-            found = self.hand.problem(X, g.open_width, bin_, clearance)
+            width = g.open_width if what == "pick" else self.config.open_width
+            found = self.hand.problem(X, width, bin_, clearance)
             if found is not None:
                 return (
-                    f"{found.geom} of the hand open to {g.open_width * 1000:.0f} mm comes within "
+                    f"{found.geom} of the hand open to {width * 1000:.0f} mm comes within "
                     f"{found.distance * 1000:.1f} mm of {found.where} at the {what} (its "
                     f"footprint; clearance {clearance * 1000:.0f} mm)"
                 )
@@ -536,7 +542,11 @@ class PickPlacePlanner:
         planner's)."""
         if grasp is None:
             grasp = self.rank(X_WO_pick, X_WO_place)[0].grasp
-        config = replace(config or self.config, open_width=grasp.open_width)
+        config = replace(
+            config or self.config,
+            open_width=grasp.open_width,
+            release_width=self.config.open_width,  # the whole opening its open time spans
+        )
         return plan_pick_place(
             self.X_WG_home,
             X_WO_pick,
