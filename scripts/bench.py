@@ -4,8 +4,8 @@ Targets (figures, not tests):
 - qp IK tick <= 0.5x mink.solve_ik on the identical problem;
 - nominal pick-and-place >= 40x real time headless, >= 30x while recording;
 - sweep throughput with all workers >= 1.8x that with 1 worker (2 cores);
-- median planning time, all candidates included, <= 25 ms; nominal run >= 55x real time with
-  its planning included;
+- planning time of the nominal pose and median over uniform bin-1 poses, the candidates ranked
+  and the best pre-flighted, <= 30 ms; nominal run >= 55x real time with its planning included;
 - nominal cycle time <= 1.25x its joint-speed bound (each keyframe segment's largest per-joint
   path length over speed limit, summed, plus the gripper's actions, from the run's own
   commanded joint path), with success, slip <= 3 mm, speed ratio <= 1, tracking <= 10 mm;
@@ -51,14 +51,20 @@ from pickplace.robot.registry import bundled_robots
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.loader import clear_scene_cache, load_scene
 from pickplace.sweep.sweep import SweepRequest, run_sweep
-from pickplace.world.placements import brick_on_floor, random_placement, target_placement
+from pickplace.world.placements import (
+    brick_on_floor,
+    nominal_placement,
+    target_placement,
+    uniform_placement,
+)
 
 TARGETS = {
     "ik_tick_ratio_vs_mink": ("<=", 0.5),
     "realtime_factor_headless": (">=", 40.0),
     "realtime_factor_recording": (">=", 30.0),
     "sweep_speedup_all_workers": (">=", 1.8),
-    "planning_time_ms_median": ("<=", 25.0),
+    "planning_time_ms_nominal": ("<=", 30.0),
+    "planning_time_ms_median": ("<=", 30.0),
     "realtime_factor_headless_with_planning": (">=", 55.0),
     "cycle_time_ratio_to_bound": ("<=", 1.25),
     "nominal_max_slip_m": ("<=", 0.003),
@@ -200,22 +206,37 @@ def cycle_time(sim: Any) -> dict[str, float]:
 
 
 def planning_times() -> dict[str, float]:
-    """Median and p90 time of one planning (all candidates tried, each pre-flighted) over
-    PLANNING_POSES brick poses drawn like pick-place-random's, feasible or not [ms]."""
+    """Planning time of the nominal pose and median and p90 over PLANNING_POSES poses drawn
+    like pick-place-uniform's (uniform over bin 1's valid poses), feasible or not, each with
+    its candidates ranked and the best pre-flighted until one is feasible [ms]; wall and CPU
+    time (the CPU time is what a shared machine's load does not inflate), and the mean number
+    of candidates pre-flighted."""
     scene = load_scene()
     planner = PickPlacePlanner(scene, "qp")
     X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
-    times, candidates = [], []
-    for seed in range(PLANNING_POSES):
-        p = random_placement(scene, np.random.default_rng(seed))
+
+    def timed(p: Any) -> tuple[float, float, int, bool]:
         X_pick = brick_on_floor(scene, p, scene.source_bin.floor_top_z)
+        cpu = time.process_time()
         report = planner.plan(X_pick, X_place)
-        times.append(report.planning_time_s * 1e3)
-        candidates.append(len(report.candidates))
+        cpu = time.process_time() - cpu
+        pre_flighted = len(report.candidates) if report.candidates[0].preflight.q.size else 0
+        return report.planning_time_s * 1e3, cpu * 1e3, pre_flighted, report.feasible
+
+    timed(nominal_placement(scene))  # warm-up
+    nominal = [timed(nominal_placement(scene)) for _ in range(5)]
+    runs = [
+        timed(uniform_placement(scene, np.random.default_rng(s))) for s in range(PLANNING_POSES)
+    ]
+    wall, cpu = [r[0] for r in runs], [r[1] for r in runs]
     return {
-        "planning_time_ms_median": statistics.median(times),
-        "planning_time_ms_p90": float(np.percentile(times, 90)),
-        "planning_candidates_mean": float(np.mean(candidates)),
+        "planning_time_ms_nominal": statistics.median(r[0] for r in nominal),
+        "planning_cpu_ms_nominal": statistics.median(r[1] for r in nominal),
+        "planning_time_ms_median": statistics.median(wall),
+        "planning_cpu_ms_median": statistics.median(cpu),
+        "planning_time_ms_p90": float(np.percentile(wall, 90)),
+        "planning_preflighted_mean": float(np.mean([r[2] for r in runs])),
+        "planning_feasible_fraction": float(np.mean([r[3] for r in runs])),
     }
 
 

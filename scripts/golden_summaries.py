@@ -217,10 +217,8 @@ TOLERANCES: tuple[Rule, ...] = (
     Rule("target_xyz[]", LENGTH, "where the brick is to be placed [m]"),
     Rule("plan.keyframes[].position[]", LENGTH, "keyframe tool positions [m]"),
     Rule("plan.keyframes[].gripper_width", LENGTH, "keyframe finger gaps [m]"),
-    Rule("plan.candidates[].problem.point[]", LENGTH, "where a rejected plan collides [m]"),
     Rule("plan.keyframes[].quaternion_wxyz[]", UNIT, "keyframe tool orientations [1]"),
     Rule("plan.keyframes[].t", TIME, "keyframe times of the plan [s]"),
-    Rule("plan.candidates[].problem.t", TIME, "when a rejected plan collides [s]"),
     Rule("events[].t", TIME, "sim time of an event [s] (its tick compares exactly)"),
     Rule("*_s", TIME, "times [s]: cycle, simulated, failure, checked until"),
     Rule("*_m", LENGTH, "distances [m]: tracking and place errors, slip, clearances"),
@@ -232,7 +230,6 @@ TOLERANCES: tuple[Rule, ...] = (
     Rule("min_manipulability_w1", JACOBIAN, "smallest manipulability w1 of the tool Jacobian"),
     Rule("*min_singular_value", JACOBIAN, "smallest σ of the tool Jacobian: run, plan, pre-flight"),
     Rule("events[].text", PRINTED, "event texts, which print measured values", kind="text"),
-    Rule("plan.candidates[].problem.text", PRINTED, "a rejected plan's problem", kind="text"),
 )
 
 

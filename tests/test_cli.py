@@ -21,7 +21,7 @@ BAD_INPUTS = [
     (["--brick", "nan,-0.55,0"], "must be X,Y,YAW"),
     (["--brick", "inf,-0.55,0"], "must be X,Y,YAW"),
     (["--brick", "0.5,0.5,0"], "outside bin1"),
-    (["--brick=0.17,-0.55,1.57"], "no feasible plan picks the brick"),
+    (["--brick=-0.16,-0.67,0"], "no feasible plan picks the brick"),  # against two walls
     (["--seed", "-1"], "non-negative integer"),
     (["--seed", "1.5"], "non-negative integer"),
     (["--seed", "99999999999"], "--seed: seed must be an integer in"),

@@ -63,7 +63,7 @@ def test_a_refused_run_prints_the_refusal_not_a_run_s_metrics() -> None:
     from tests.test_planner import _poses
 
     _, task, sim = prepare(RunRequest())
-    X_pick, X_place = _poses(sim.scene, -0.14, -0.09, 0.785)
+    X_pick, X_place = _poses(sim.scene, -0.14, -0.095, 0.0)  # in a corner of bin 1
     report = PickPlacePlanner(sim.scene, "qp").plan(X_pick, X_place)
     assert not report.feasible
     task.planning = report

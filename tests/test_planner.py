@@ -9,11 +9,17 @@ from typing import Any
 import mujoco
 import numpy as np
 import pytest
-from mink.lie import SE3
+from mink.lie import SE3, SO3
 
 from pickplace.geometry import rotation_angle
-from pickplace.planning.grasp import brick_width_across, yaw_of
-from pickplace.planning.plan import PlanConfig, plan_pick_place, swung_pose
+from pickplace.planning.candidates import (
+    GRASP_OFFSET_FRACTIONS,
+    GRASP_TILTS,
+    GRAVITY,
+    PAD_CLEARANCE,
+    gravity_torque,
+)
+from pickplace.planning.plan import PlanConfig, plan_pick_place
 from pickplace.planning.planner import PickPlacePlanner
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.checks import FailureReason
@@ -22,8 +28,9 @@ from pickplace.world.placements import BrickPlacement, brick_on_floor, target_pl
 from pickplace.world.scene import Scene
 from tests.conftest import run_cli
 
-# A corner of bin 1 where no grasp fits: 60 mm from two walls, turned 45°.
-CORNER = "--brick=-0.14,-0.64,0.785"
+# A corner of bin 1 where no grasp fits: the brick against two walls, the WSG's 146 mm palm
+# over one of them whichever way it closes.
+CORNER = "--brick=-0.16,-0.67,0"
 
 
 def _poses(scene: Scene, x_B: float, y_B: float, yaw: float) -> tuple[SE3, SE3]:
@@ -35,59 +42,126 @@ def _poses(scene: Scene, x_B: float, y_B: float, yaw: float) -> tuple[SE3, SE3]:
     return X_pick, X_place
 
 
-def test_candidates_are_the_brick_s_grasp_symmetries_in_the_stated_order(scene: Scene) -> None:
+def test_candidates_are_antipodal_opened_by_the_clearance_and_keep_the_pads_on_the_faces(
+    scene: Scene,
+) -> None:
+    """Every candidate closes along a box axis through the box's centre plane, approaches
+    perpendicular to it within the largest tilt of vertical, opens to the width plus
+    PAD_CLEARANCE a side, and keeps the pad on the face; each comes with its wrist twin."""
     planner = PickPlacePlanner(scene, "qp")
-    X_pick, _ = _poses(scene, 0.0, 0.0, 0.3)
-    grasps = list(planner.grasps(X_pick))
-    labels = [label for label, _ in grasps]
-    assert labels == [
-        "across the width",
-        "across the width, turned 180°",
-        "across the length",
-        "across the length, turned 180°",
-    ]
     half = scene.brick_half_extents
-    widths = [brick_width_across(X_OG, half) for _, X_OG in grasps]
-    np.testing.assert_allclose(widths, [0.05, 0.05, 0.075, 0.075], atol=1e-12)
-    # Each is a top-down grasp at the brick's centre, a quarter turn apart about its z.
-    R = [X_OG.rotation() for _, X_OG in grasps]
-    assert rotation_angle(R[0], R[1]) == pytest.approx(math.pi)
-    assert rotation_angle(R[0], R[2]) == pytest.approx(math.pi / 2)
-    assert rotation_angle(R[2], R[3]) == pytest.approx(math.pi)
-    for _, X_OG in grasps:
-        np.testing.assert_allclose(X_OG.translation(), 0.0, atol=1e-15)
-    # Of each pair, the first needs the smaller wrist turn from the home yaw carried along by
-    # the base swing.
-    reference = swung_pose(planner.X_WG_home, X_pick.translation(), scene.robot.p_W_base)
-    yaw = yaw_of(reference.rotation())
+    grasps = planner.grasps()
+    # 2 face pairs (the iiwa's WSG opens 100 mm) x 5 tilts x 3 offsets x 2 turns.
+    assert len(grasps) == 2 * (2 * len(GRASP_TILTS) - 1) * len(GRASP_OFFSET_FRACTIONS) * 2
+    assert grasps[0].label == "across the width"
+    for g in grasps:
+        R = g.X_OG.rotation().as_matrix()
+        y_O, z_O, x_O = R[:, 1], R[:, 2], R[:, 0]
+        axis = int(np.argmax(np.abs(y_O)))
+        assert abs(abs(y_O[axis]) - 1.0) < 1e-12  # closing along a box axis: antipodal faces
+        assert axis in (0, 1)
+        assert g.width == pytest.approx(2.0 * half[axis], abs=1e-12)
+        assert g.open_width == pytest.approx(g.width + 2.0 * PAD_CLEARANCE, abs=1e-12)
+        p = g.X_OG.translation()
+        assert abs(p[axis]) < 1e-12 and abs(p[2]) < 1e-12  # midway between the faces
+        assert math.acos(float(np.clip(-z_O[2], -1.0, 1.0))) == pytest.approx(abs(g.tilt))
+        assert abs(x_O[2]) == pytest.approx(math.sin(abs(g.tilt)), abs=1e-12)
+        along = 1 - axis  # the offset runs along the face, horizontally
+        assert abs(p[along]) + planner.pad_half_length <= half[along] + 1e-12
+        assert abs(p[along]) == pytest.approx(abs(g.offset), abs=1e-12)
+    by_label = {g.label: g for g in grasps}
+    for g in grasps:
+        if g.turned:
+            twin = by_label[g.label.replace(", turned 180°", "")]
+            np.testing.assert_allclose(g.X_OG.translation(), twin.X_OG.translation(), atol=1e-15)
+            R, R_twin = g.X_OG.rotation(), twin.X_OG.rotation()
+            assert rotation_angle(R, R_twin) == pytest.approx(math.pi)
 
-    def turn(X_OG: SE3) -> float:
-        return abs(math.remainder(yaw_of((X_pick @ X_OG).rotation()) - yaw, 2 * math.pi))
 
-    assert turn(grasps[0][1]) <= turn(grasps[1][1])
-    assert turn(grasps[2][1]) <= turn(grasps[3][1])
+def test_the_weight_s_torque_about_the_pads_is_weight_times_offset(scene: Scene) -> None:
+    """Whatever the tilt (a turn about the pad axis itself), m g times the offset."""
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick, _ = _poses(scene, 0.0, 0.0, 0.7)
+    m = scene.brick_mass
+    for g in planner.grasps():
+        tau = gravity_torque(X_pick, g.X_OG, np.zeros(3), m)
+        assert tau == pytest.approx(m * GRAVITY * abs(g.offset), abs=1e-12)
 
 
 def test_a_narrow_gripper_gets_no_length_grasp(scene: Scene) -> None:
-    """Closing across the 75 mm length needs the open fingers to clear it on both sides."""
+    """Closing across the 75 mm length needs the fingers open to 75 + 2 x 6 mm."""
     planner = PickPlacePlanner(scene, "qp", PlanConfig(open_width=0.08))
-    X_pick, _ = _poses(scene, 0.0, 0.0, 0.0)
-    assert [label for label, _ in planner.grasps(X_pick)] == [
-        "across the width",
-        "across the width, turned 180°",
-    ]
+    assert {g.label.split(",")[0] for g in planner.grasps()} == {"across the width"}
+
+
+def test_the_open_hand_s_footprint_is_the_distance_of_its_boxes_to_the_walls(
+    scene: Scene,
+) -> None:
+    """The hand straight down over bin 1's centre: its smallest distance to the walls is the
+    inner half width less the boxes' largest extent along that axis; moved towards the +y wall
+    by d, the distance falls by d."""
+    planner = PickPlacePlanner(scene, "qp")
+    hand, width = planner.hand, 0.062
+    corners = hand.corners_G(width)
+    bin_ = scene.source_bin
+    floor_z = float(bin_.to_bin_frame(bin_.center_W)[2])
+    R_BG = np.diag([1.0, -1.0, -1.0])  # pointing down
+    p = np.array([0.0, 0.0, floor_z + 0.025])
+
+    def distance(shift: float) -> float:
+        d, _, _ = hand.distances(R_BG[None], (p + np.array([0.0, shift, 0.0]))[None], width, bin_)
+        return float(d[0])
+
+    P = corners @ R_BG.T + p
+    top = floor_z + bin_.wall_top_z - bin_.floor_top_z
+    # Pointing straight down the boxes stay axis-aligned: a box reaching below the top has
+    # its whole xy extent there.
+    low = P[P[..., 2].min(axis=1) < top].reshape(-1, 3)
+    expected = min(
+        float(bin_.inner_half_extents[0] - np.abs(low[:, 0]).max()),
+        float(bin_.inner_half_extents[1] - np.abs(low[:, 1]).max()),
+        float(low[:, 2].min() - floor_z),
+    )
+    assert distance(0.0) == pytest.approx(expected, abs=1e-12)
+    y_extent = float(low[:, 1].max())
+    shift = float(bin_.inner_half_extents[1]) - y_extent - 0.001  # 1 mm from the +y wall
+    assert distance(shift) == pytest.approx(0.001, abs=1e-12)
+    X_WG = SE3.from_rotation_and_translation(
+        SO3.from_matrix(bin_.X_WB.rotation().as_matrix() @ R_BG),
+        bin_.X_WB.apply(p + np.array([0.0, shift, 0.0])),
+    )
+    found = hand.problem(X_WG, width, bin_, 0.005)
+    assert found is not None and found.where == "bin1's +y wall"
+    assert found.distance == pytest.approx(0.001, abs=1e-12)
 
 
 def test_near_a_wall_the_length_grasp_is_chosen(scene: Scene) -> None:
-    """60 mm from the far wall, closing across the width puts the palm over the wall; closing
-    across the length does not (docs/physics-notes.md, class W)."""
+    """60 mm from the far wall, closing across the width puts the palm over the wall, which the
+    footprint sees without a pre-flight; closing across the length does not
+    (docs/physics-notes.md, class W)."""
     X_pick, X_place = _poses(scene, 0.0, -0.09, 0.0)
-    report = PickPlacePlanner(scene, "qp").plan(X_pick, X_place)
+    planner = PickPlacePlanner(scene, "qp")
+    ranked = planner.rank(X_pick, X_place)
+    width = [r for r in ranked if r.grasp.label.startswith("across the width") and not r.grasp.tilt]
+    assert width and all(r.problem is not None for r in width)
+    report = planner.plan(X_pick, X_place)
     assert report.feasible
     chosen = report.candidates[report.chosen or 0]
-    assert chosen.label == "across the length"
-    rejected = [c for c in report.candidates if c.preflight.problem is not None]
-    assert len(rejected) == 2 and all(c.preflight.problem.kind == "collision" for c in rejected)
+    assert chosen.label.startswith("across the length")
+    assert not any(c.label.startswith("across the width") for c in report.candidates)
+
+
+def test_a_brick_resting_against_a_wall_is_picked(scene: Scene) -> None:
+    """3 mm from bin 1's -y wall, within the 5 mm clearance where it lies: that pair is not a
+    clearance violation (it leaves straight up), and the brick is picked."""
+    half = scene.source_bin.inner_half_extents
+    X_pick, X_place = _poses(scene, 0.0, -(float(half[1]) - 0.025 - 0.003), 0.0)
+    planner = PickPlacePlanner(scene, "qp")
+    kinds = planner.preflight._pair_kinds(X_pick, X_place)
+    assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_ny").id] == 0
+    assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_py").id] == 2
+    report = planner.plan(X_pick, X_place)
+    assert report.feasible, report.problems()
 
 
 def test_swing_via_point_equals_the_shortest_arc_under_a_half_turn(scene: Scene) -> None:
@@ -120,9 +194,9 @@ def test_swing_via_point_equals_the_shortest_arc_under_a_half_turn(scene: Scene)
 
 
 def test_no_feasible_plan_ends_the_run_before_any_physics(scene: Scene) -> None:
-    X_pick, X_place = _poses(scene, -0.14, -0.09, 0.785)
+    X_pick, X_place = _poses(scene, -0.16, -0.12, 0.0)
     report = PickPlacePlanner(scene, "qp").plan(X_pick, X_place)
-    assert not report.feasible and len(report.candidates) == 4
+    assert not report.feasible and len(report.candidates) == 1
     _, task, sim = prepare(RunRequest())
     task.planning = report
     task.plan = report.plan
@@ -131,8 +205,10 @@ def test_no_feasible_plan_ends_the_run_before_any_physics(scene: Scene) -> None:
     assert result.failure is FailureReason.NO_FEASIBLE_PLAN
     assert (s["ticks"], s["failure_tick"], s["success"]) == (0, 0, False)
     rejected = [e for e in s["events"] if e["kind"] == "plan"]
-    assert len(rejected) == 4
+    assert len(rejected) == 1
     assert s["plan"]["feasible"] is False
+    failure = next(e for e in s["events"] if e["kind"] == "failure")
+    assert report.refusal() in failure["text"] and "palm" in failure["text"]
 
 
 def test_corner_brick_is_refused_by_run_and_reported_by_plan() -> None:
@@ -145,10 +221,10 @@ def test_corner_brick_is_refused_by_run_and_reported_by_plan() -> None:
     assert proc.returncode == 1
     report = json.loads(proc.stdout)
     assert report["feasible"] is False and report["chosen"] is None
-    assert len(report["candidates"]) == 4
+    assert len(report["candidates"]) == 1  # the best; none passed the footprint
     for c in report["candidates"]:
         assert c["feasible"] is False
-        assert c["problem"]["kind"] in {"collision", "joint-limit", "ik"}
+        assert c["problem"]["kind"] == "collision" and "footprint" in c["problem"]["text"]
         assert len(c["problem"]["point"]) == 3
 
 

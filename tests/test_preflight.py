@@ -8,8 +8,9 @@ import math
 import mujoco
 import numpy as np
 import pytest
+from mink.lie import SE3
 
-from pickplace.planning.planner import PickPlacePlanner
+from pickplace.planning.planner import Candidate, PickPlacePlanner
 from pickplace.planning.preflight import Preflight, PreflightConfig, collision_model
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.world.placements import BrickPlacement, brick_on_floor, target_placement
@@ -54,13 +55,32 @@ def test_a_nominal_plan_is_feasible_with_stated_margins(scene: Scene) -> None:
     assert r.min_singular_value >= cfg.min_singular_value
 
 
+def _across_the_width(planner: PickPlacePlanner, X_pick: SE3, X_place: SE3) -> Candidate:
+    """The vertical grasp across the width, pre-flighted whatever its cheap tests say (the
+    planner would not pre-flight it where its footprint fails)."""
+    grasp = next(g for g in planner.grasps() if g.label == "across the width")
+    plan, result, warning = planner.timed_plan(X_pick, X_place, grasp)
+    return Candidate(grasp.label, plan, result, warning)
+
+
+def test_the_footprint_and_the_pre_flight_agree_on_the_palm_over_a_wall(scene: Scene) -> None:
+    """60 mm from the far wall: the cheap footprint test refuses the grasp across the width,
+    and its pre-flight finds the palm within the clearance of that wall."""
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick, X_place = _poses(scene, _bin1(scene, 0.0, -0.09, 0.0))
+    ranked = next(r for r in planner.rank(X_pick, X_place) if r.grasp.label == "across the width")
+    assert ranked.problem is not None and ranked.clearance < 0.0
+    problem = _across_the_width(planner, X_pick, X_place).preflight.problem
+    assert problem is not None and problem.kind == "collision"
+    assert "palm" in problem.text and "bin1_wall_ny" in problem.text
+
+
 def test_clearance_is_mujocos_distance_between_the_named_geoms(scene: Scene) -> None:
     """The reported problem names two geoms; MuJoCo's own mj_geomDistance between them, at the
     problem's configuration, is the reported clearance."""
     planner = PickPlacePlanner(scene, "qp")
     X_pick, X_place = _poses(scene, _bin1(scene, 0.0, -0.09, 0.0))  # 60 mm from the far wall
-    report = planner.plan(X_pick, X_place, first_feasible=False)
-    first = report.candidates[0]
+    first = _across_the_width(planner, X_pick, X_place)
     problem = first.preflight.problem
     assert problem is not None and problem.kind == "collision"
     robot_geom, rest = problem.text.split(" comes within ")
@@ -86,7 +106,7 @@ def test_a_palm_over_a_wall_is_refused_and_the_run_would_have_hit_it(scene: Scen
     pre-flight says collision; the same plan executed anyway touches the wall."""
     planner = PickPlacePlanner(scene, "qp")
     X_pick, X_place = _poses(scene, _bin1(scene, 0.0, -0.09, 0.0))
-    first = planner.plan(X_pick, X_place).candidates[0]
+    first = _across_the_width(planner, X_pick, X_place)
     assert first.preflight.problem is not None
     assert first.preflight.problem.kind == "collision"
     assert "bin1_wall" in first.preflight.problem.text
@@ -131,7 +151,10 @@ def test_a_wrist_wound_into_its_limit_is_refused(scene: Scene) -> None:
     planner = PickPlacePlanner(scene, "qp")
     X_pick, X_place = _poses(scene, _bin1(scene, -0.121, 0.002, -0.212))
     found = []
-    for _, X_OG in planner.grasps(X_pick):
+    for grasp in planner.grasps():
+        if grasp.tilt or grasp.offset:
+            continue  # vertical and centred: both turns of both face pairs
+        X_OG = grasp.X_OG
         plan = plan_pick_place(
             planner.X_WG_home,
             X_pick,

@@ -65,6 +65,11 @@ class PlanConfig:
         open_width: Commanded finger gap when open [m], at most: the planner opens a
             gripper that opens less as wide as it opens (:func:`for_gripper`).
         closed_width: Commanded finger gap when closed [m]; the brick stops the fingers.
+        release_width: Commanded finger gap at the release and the retreat [m]; 0 means
+            ``open_width``. The planner releases to the gripper's whole opening, over which its
+            open time is calibrated (the pads clear the brick by 5 mm a side before the
+            release ends: :mod:`pickplace.robot.calibration`), while it opens only as wide as
+            the object needs for the pick.
         min_segment_duration: Lower bound of every segment duration [s].
         time_quantum: When > 0, every segment duration is rounded up to a whole number of
             these [s] (the pre-flight's path sweep puts its ticks on the keyframes with it).
@@ -86,6 +91,7 @@ class PlanConfig:
     settle_time: float = 0.05
     open_width: float = GRASP_OPEN_WIDTH
     closed_width: float = 0.0
+    release_width: float = 0.0
     min_segment_duration: float = 0.05
     time_quantum: float = 0.0
     pass_through: bool = True
@@ -97,7 +103,7 @@ class PlanConfig:
             if f.name in ("profile", "pass_through"):
                 continue
             value = getattr(self, f.name)
-            if f.name in ("settle_time", "closed_width", "time_quantum"):
+            if f.name in ("settle_time", "closed_width", "time_quantum", "release_width"):
                 checked = require_non_negative(f.name, value, PlanError)
             else:
                 checked = require_positive(f.name, value, PlanError)
@@ -304,7 +310,7 @@ def swung_pose(X_WG: SE3, p_W_to: np.ndarray, p_W_base: np.ndarray | None) -> SE
     """
     if p_W_base is None:
         return X_WG
-    swing = _swing(X_WG.translation(), p_W_to, p_W_base)
+    swing = base_swing(X_WG.translation(), p_W_to, p_W_base)
     return SE3.from_rotation(SO3.from_z_radians(swing)) @ X_WG
 
 
@@ -315,7 +321,7 @@ VIA_ORIENTATIONS = ("swing", "shortest")
 _VERTICAL_AXIS_TOL = 1e-9
 
 
-def _swing(p_W_from: np.ndarray, p_W_to: np.ndarray, p_W_base: np.ndarray) -> float:
+def base_swing(p_W_from: np.ndarray, p_W_to: np.ndarray, p_W_base: np.ndarray) -> float:
     """Azimuth change about the base's vertical axis from one point to another [rad]."""
     a, b = p_W_from[:2] - p_W_base[:2], np.asarray(p_W_to)[:2] - p_W_base[:2]
     return wrap_angle(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]))
@@ -421,10 +427,11 @@ def plan_pick_place(
     R_lift, R_pre_place = X_WG_lift.rotation(), X_WG_pre_place.rotation()
     R_clearance = slerp(R_lift, R_pre_place, 0.5)
     if via == "swing" and base is not None:
-        R_clearance = _swing_halfway(R_lift, R_pre_place, _swing(p_lift, p_pre_place, base))
+        R_clearance = _swing_halfway(R_lift, R_pre_place, base_swing(p_lift, p_pre_place, base))
     X_WG_clearance = SE3.from_rotation_and_translation(R_clearance, p_clearance)
 
     w_open, w_closed = config.open_width, config.closed_width
+    w_release = config.release_width or w_open
     # The tool stops where the gripper acts and at the ends; it passes through pre-pick, lift,
     # clearance and pre-place: the approach and the transfer are curves that leave and reach
     # the straight vertical moves (descent, lift, place) along them.
@@ -448,8 +455,8 @@ def plan_pick_place(
         Waypoint("clearance", X_WG_clearance, w_closed, stop=not passing, curve=passing),
         Waypoint("pre-place", X_WG_pre_place, w_closed, stop=not passing, curve=passing),
         Waypoint("place", X_WG_place, w_closed),
-        Waypoint("release", X_WG_place, w_open, config.open_time),
-        Waypoint("retreat", _backed_off(X_WG_place, config.approach_distance), w_open),
+        Waypoint("release", X_WG_place, w_release, config.open_time),
+        Waypoint("retreat", _backed_off(X_WG_place, config.approach_distance), w_release),
     ]
     keyframes = time_keyframes(waypoints, config)
     t = {k.name: k.t for k in keyframes}  # the names this function itself just gave

@@ -1,23 +1,32 @@
-"""Plans the robot can execute: pick-and-place candidates, each pre-flighted, in a stated order.
+"""Plans the robot can execute: grasp candidates ranked by cheap tests, the best few pre-flighted.
 
-The planner makes the candidates of a pick from ``X_WO_pick`` and a place at ``X_WO_place`` and
-pre-flights each one with the run's own controller (:mod:`pickplace.planning.preflight`), in this
-order,
-taking the first that is feasible:
+The planner makes the grasp candidates of the object's box (:func:`~pickplace.planning.candidates.
+box_grasps`: both pairs of side faces, the approach vertical or tilted about the closing axis,
+the pads centred or off-centre along the face, both wrist turns; the gripper opened to the
+object's width plus :data:`~pickplace.planning.candidates.PAD_CLEARANCE` a side), and ranks them
+by tests that need no IK, in this order:
 
-1. "across the width": the top-down grasp closing across the brick's width whose yaw is
-   nearest the tool's (carried along by the base swing) — the default grasp of
-   :func:`~pickplace.planning.plan.plan_pick_place`;
-2. "across the width, turned 180°": its symmetric twin about the brick's vertical axis;
-3. "across the length": turned 90°, closing across the brick's length, the nearer yaw of the
-   two — only when the open fingers clear the brick's length by the pre-flight clearance on
-   each side;
-4. "across the length, turned 180°".
+1. reach: the tool at the pick and the place within the arm's reach (the sum of its link
+   lengths from the first joint's anchor);
+2. the open hand's footprint: its collision boxes at the pick (opened to the grasp's width) and at
+   the place (opened to the whole opening the release ramps to) inside the bin's
+   inner walls and above its floor by the pre-flight's clearance
+   (:class:`~pickplace.planning.candidates.HandFootprint`);
+3. the wrist's margin: the last joint's angle at the pick and after the transfer, predicted from
+   the tool's yaw changes (:meth:`PickPlacePlanner.rank`), at least
+   :data:`WRIST_MARGIN` from its limits.
+
+A candidate failing 1 or 2 is not pre-flighted; one failing 3 is ranked after those that pass.
+Among the passing, the smaller tilt first, then the smaller torque of the weight about the pads
+(:func:`~pickplace.planning.candidates.gravity_torque`), then the narrower width, then the
+smaller wrist travel (the nearest yaw, as every plan chose before candidates existed). The best
+:data:`MAX_PREFLIGHTS` are pre-flighted with the run's own controller
+(:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is taken. If
+none is, the report says so, with each pre-flighted candidate's first problem; if none passed
+1 and 2, with the best-ranked candidate's cheap-test problem.
 
 Every candidate's clearance via-point turns with the base swing (``via="swing"``, see
-:func:`pickplace.planning.plan.plan_pick_place`). Measured on bin 1 (``docs/physics-notes.md``): the
-180° twin rescues only wrist cases, the 90° grasp every wall case; the swing via-point every
-wrist case. If none is feasible the report says so, with each candidate's first problem.
+:func:`pickplace.planning.plan.plan_pick_place`).
 
 A brick that the grip cannot hold even at rest within the timing's slip budget (too heavy,
 too little friction or grip force: :class:`~pickplace.planning.timing.GripTooWeakError`) is still
@@ -29,17 +38,28 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from mink.lie import SE3, SO3
+from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
-from pickplace.planning.grasp import brick_width_across, top_down_grasps, yaw_of
-from pickplace.planning.plan import Plan, PlanConfig, for_gripper, plan_pick_place, swung_pose
-from pickplace.planning.preflight import Preflight, PreflightConfig, PreflightResult
+from pickplace.planning.candidates import (
+    GRAVITY,
+    GraspCandidate,
+    HandFootprint,
+    box_grasps,
+)
+from pickplace.planning.grasp import choose_place_pose, yaw_of
+from pickplace.planning.plan import (
+    Plan,
+    PlanConfig,
+    for_gripper,
+    plan_pick_place,
+    swung_pose,
+)
+from pickplace.planning.preflight import Preflight, PreflightConfig, PreflightResult, Problem
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 from pickplace.world.scene import Scene
 
@@ -50,6 +70,20 @@ CLEARANCE_ABOVE_WALLS = 0.125
 # pre-flight ticks (for the collision checks and the joint path the timing works on).
 PATH_SPACING = 0.02
 PATH_ANGLE = 0.1
+_RZ_PI = np.diag([-1.0, -1.0, 1.0])  # a half turn about z
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped into [-π, π) [rad]."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+MAX_PREFLIGHTS = 4
+"""Most candidates pre-flighted in one planning, best-ranked first."""
+WRIST_MARGIN = 0.3
+"""Predicted distance of the last joint from its limits below which a candidate is ranked
+after those above it [rad]: the prediction counts the last joint alone, and the pre-flight
+measured the others sharing the turn, or the path overshooting it, by up to about 0.2 rad."""
 
 
 @dataclass(frozen=True)
@@ -91,12 +125,15 @@ class PlanningReport:
         chosen: Index of the chosen (first feasible) candidate, or None.
         planning_time_s: Wall time spent planning and pre-flighting [s].
         config: The pre-flight's rate and thresholds.
+        ranked: How many grasp candidates were ranked by the cheap tests (``candidates`` holds
+            the pre-flighted ones, or the best-ranked one when none passed the cheap tests).
     """
 
     candidates: tuple[Candidate, ...]
     chosen: int | None
     planning_time_s: float
     config: PreflightConfig
+    ranked: int = 0
 
     @property
     def feasible(self) -> bool:
@@ -107,6 +144,15 @@ class PlanningReport:
     def plan(self) -> Plan:
         """The chosen plan, or (when none is feasible) the first candidate's."""
         return self.candidates[0 if self.chosen is None else self.chosen].plan
+
+    def refusal(self) -> str:
+        """Why no plan is feasible: the best candidate's first problem (empty if feasible)."""
+        if self.feasible:
+            return ""
+        best = self.candidates[0]
+        p = best.preflight.problem
+        assert p is not None  # an infeasible candidate has a problem
+        return f"the best candidate, '{best.label}', at t={p.t:.2f} s: {p.text}"
 
     def problems(self) -> str:
         """Each candidate's first problem, one clause each."""
@@ -145,15 +191,55 @@ class PlanningReport:
         }
 
 
+@dataclass(frozen=True)
+class Ranked:
+    """A grasp candidate and its cheap tests (see the module docstring).
+
+    Attributes:
+        grasp: The candidate.
+        problem: The first cheap test it fails (reach or footprint), or None.
+        clearance: The open hand's smallest distance to the bins at the pick and the place
+            [m].
+        wrist_margin: Predicted distance of the last joint from its limits [rad] (inf for a
+            last joint without limits).
+        wrist_travel: Predicted turn of the last joint, home to pick plus the transfer [rad].
+        torque: Torque of the object's weight about the pad axis [N m].
+    """
+
+    grasp: GraspCandidate
+    problem: str | None
+    clearance: float
+    wrist_margin: float
+    wrist_travel: float
+    torque: float
+
+    def key(self) -> tuple[bool | float, ...]:
+        """Sort key: passing first, then the order of the module docstring; failing ones
+        nearest to passing first."""
+        if self.problem is not None:
+            return (True, -self.clearance)
+        return (
+            self.problem is not None,
+            self.wrist_margin < WRIST_MARGIN,
+            abs(self.grasp.tilt),
+            round(self.torque, 9),
+            round(self.grasp.width, 9),
+            self.wrist_travel,
+            -self.clearance,
+        )
+
+
 class PickPlacePlanner:
-    """Makes and pre-flights pick-and-place candidates (see the module docstring).
+    """Makes, ranks and pre-flights pick-and-place candidates (see the module docstring).
 
     Args:
         scene: The scene (bins, brick, arm, gripper).
         controller: Name of the run's controller, which the pre-flight runs.
         config: Planning limits and parameters; the open width is capped at the gripper's
-            (:func:`~pickplace.planning.plan.for_gripper`).
+            (:func:`~pickplace.planning.plan.for_gripper`), and each candidate opens only as
+            wide as its object width needs.
         preflight: Pre-flight rate and thresholds.
+        timing: How plans are timed by the robot's limits.
     """
 
     def __init__(
@@ -179,38 +265,225 @@ class PickPlacePlanner:
             min_segment_duration=2 * dt,
             time_quantum=dt,
         )
-        pads = np.concatenate(scene.robot.pad_geom_ids)
+        robot = scene.robot
+        pads = np.concatenate(robot.pad_geom_ids)
         mu = float(scene.model.geom_friction[pads, 0].min())  # the pads have contact priority
         # |a − g| the pads' friction holds on the brick: μ · 2 sides · squeeze force / mass.
-        self.slip_accel = mu * 2.0 * scene.robot.squeeze_force / scene.brick_mass
+        self.slip_accel = mu * 2.0 * robot.squeeze_force / scene.brick_mass
         kin = ArmKinematics(scene)
-        kin.update(scene.robot.q_home)
+        kin.update(robot.q_home)
         self.X_WG_home = kin.X_WG()
         src, dst = scene.source_bin, scene.target_bin
         self.clearance_z = max(src.wall_top_z, dst.wall_top_z) + CLEARANCE_ABOVE_WALLS
+        # Reach: the link lengths, anchor to anchor (fixed in each link), and on to the tool.
+        anchors = kin.data.xanchor[: robot.n_joints]
+        self.p_W_shoulder = anchors[0].copy()
+        self.reach = float(
+            np.linalg.norm(np.diff(anchors, axis=0), axis=1).sum()
+            + np.linalg.norm(self.X_WG_home.translation() - anchors[-1])
+        )
+        # The last joint turns the tool's yaw by its own angle times its axis' z component.
+        self.wrist_axis_z = float(kin.data.xaxis[robot.n_joints - 1][2])
+        self.hand = HandFootprint(
+            self.preflight.model,
+            robot.gripper_geom_ids,
+            [scene.geom_name(int(g)) for g in robot.gripper_geom_ids],
+            robot.tool_site_id,
+            scene.gripper_qpos_adr,
+            robot.qpos_for_width,
+            (robot.arm_qpos_adr, robot.q_home),
+        )
+        pad_hand = HandFootprint(
+            self.preflight.model,
+            pads,
+            [scene.geom_name(int(g)) for g in pads],
+            robot.tool_site_id,
+            scene.gripper_qpos_adr,
+            robot.qpos_for_width,
+            (robot.arm_qpos_adr, robot.q_home),
+        )
+        pad_x = pad_hand.corners_G(self.config.open_width)[..., 0]
+        self.pad_half_length = 0.5 * float(np.max(pad_x.max(axis=1) - pad_x.min(axis=1)))
+        self.p_O_com = scene.model.body_ipos[scene.brick_body_id].copy()
+        self._grasps = self.grasps()
+        self._R_OG = np.array([g.X_OG.rotation().as_matrix() for g in self._grasps])
+        self._p_OG = np.array([g.X_OG.translation() for g in self._grasps])
+        self._open_widths = np.array([g.open_width for g in self._grasps])
+        self._bin_frames = {
+            b.name: (b.X_WB.inverse().rotation().as_matrix(), b.X_WB.inverse().translation())
+            for b in (src, dst)
+        }
+        p_home = self.X_WG_home.translation() - robot.p_W_base
+        self._home_azimuth = math.atan2(p_home[1], p_home[0])
+        self._home_yaw = yaw_of(self.X_WG_home.rotation())
 
     def plan(self, X_WO_pick: SE3, X_WO_place: SE3, first_feasible: bool = True) -> PlanningReport:
-        """Try the candidates in order; stop at the first feasible one (unless told not to).
+        """Rank the candidates, pre-flight the best few in order; stop at the first feasible
+        one (unless told not to).
 
         Args:
             X_WO_pick: Brick pose to pick, in world.
             X_WO_place: Goal pose of the brick, in world.
-            first_feasible: Stop at the first feasible candidate (else try them all).
+            first_feasible: Stop at the first feasible candidate (else pre-flight all of the
+                best :data:`MAX_PREFLIGHTS`).
         """
         t0 = time.perf_counter()
+        ranked = self.rank(X_WO_pick, X_WO_place)
         tried: list[Candidate] = []
         chosen: int | None = None
-        for label, X_OG in self.grasps(X_WO_pick):
-            plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, X_OG)
-            tried.append(Candidate(label, plan, result, warning))
+        for r in ranked[:MAX_PREFLIGHTS]:
+            if r.problem is not None:
+                break
+            plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, r.grasp)
+            tried.append(Candidate(r.grasp.label, plan, result, warning))
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
                 if first_feasible:
                     break
-        return PlanningReport(tuple(tried), chosen, time.perf_counter() - t0, self.preflight.config)
+        if not tried:  # none passed the cheap tests: the best one, with its problem
+            best = ranked[0]
+            plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp)
+            tried.append(Candidate(best.grasp.label, plan, self._refused(plan, best)))
+        return PlanningReport(
+            tuple(tried), chosen, time.perf_counter() - t0, self.preflight.config, len(ranked)
+        )
+
+    def _refused(self, plan: Plan, ranked: Ranked) -> PreflightResult:
+        """A pre-flight result for a candidate refused by a cheap test, at the pick."""
+        t = plan.phases.approach[1] if plan.phases is not None else 0.0
+        p = plan.trajectory.sample(t)[0][4:]  # wxyz_xyz of the tool at the pick
+        point = (float(p[0]), float(p[1]), float(p[2]))
+        kind = "ik" if (ranked.problem or "").startswith("unreachable") else "collision"
+        problem = Problem(t, kind, ranked.problem or "", point)
+        nq = self.scene.robot.n_joints
+        return PreflightResult(
+            problem,
+            0.0,
+            ranked.clearance,
+            ranked.wrist_margin,
+            0.0,
+            0.0,
+            np.zeros(0),
+            np.zeros((0, nq)),
+        )
+
+    def rank(self, X_WO_pick: SE3, X_WO_place: SE3) -> list[Ranked]:
+        """Every grasp candidate with its cheap tests, best first (see the module docstring).
+
+        Vectorised over the candidates: the pick poses ``X_WG = X_WO X_OG``, the place poses
+        (of ``X_WO_goal X_OG`` and ``X_WO_goal Rz(π) X_OG``, the one whose yaw is nearer the
+        pick's carried along by the base swing, as :func:`~pickplace.planning.plan.
+        plan_pick_place` chooses), the reach, the open hand in each bin, the wrist, the torque.
+        """
+        sc, robot = self.scene, self.scene.robot
+        clearance = self.preflight.config.clearance
+        grasps, R_OG, p_OG = self._grasps, self._R_OG, self._p_OG
+        n = len(grasps)
+        R_pick = np.einsum("ij,njk->nik", X_WO_pick.rotation().as_matrix(), R_OG)
+        p_pick = p_OG @ X_WO_pick.rotation().as_matrix().T + X_WO_pick.translation()
+        R_goal = X_WO_place.rotation().as_matrix()
+        options = [np.einsum("ij,njk->nik", R_goal @ T, R_OG) for T in (np.eye(3), _RZ_PI)]
+        p_options = [p_OG @ (R_goal @ T).T + X_WO_place.translation() for T in (np.eye(3), _RZ_PI)]
+        yaw_pick = np.arctan2(R_pick[:, 1, 0], R_pick[:, 0, 0])
+        base = robot.p_W_base
+        to_goal = X_WO_place.translation()[:2] - base[:2]
+        from_pick = p_pick[:, :2] - base[:2]
+        swing_goal = _wrap(np.arctan2(to_goal[1], to_goal[0]) - np.arctan2(*from_pick.T[::-1]))
+        reference = yaw_pick + swing_goal
+        changes = [np.abs(_wrap(np.arctan2(R[:, 1, 0], R[:, 0, 0]) - reference)) for R in options]
+        second = changes[1] < changes[0]
+        R_place = np.where(second[:, None, None], options[1], options[0])
+        p_place = np.where(second[:, None], p_options[1], p_options[0])
+        # Reach.
+        far = np.maximum(
+            np.linalg.norm(p_pick - self.p_W_shoulder, axis=1),
+            np.linalg.norm(p_place - self.p_W_shoulder, axis=1),
+        )
+        # The open hand in each bin, per open width.
+        near = np.full(n, np.inf)
+        # The hand opens to the grasp's width at the pick, to the whole opening at the release.
+        for width in np.unique(self._open_widths):
+            sel = self._open_widths == width
+            for R, p, bin_, w in (
+                (R_pick, p_pick, sc.source_bin, width),
+                (R_place, p_place, sc.target_bin, self.config.open_width),
+            ):
+                R_BW, p_BW = self._bin_frames[bin_.name]
+                d, _, _ = self.hand.distances(
+                    np.einsum("ij,njk->nik", R_BW, R[sel]), p[sel] @ R_BW.T + p_BW, w, bin_
+                )
+                near[sel] = np.minimum(near[sel], d)
+        # The wrist: the tool's yaw changes, less what the base swing carries along, are the
+        # last joint's turns over its axis' vertical component: from home to the pick (from
+        # the yaw of the home tool swung to face the pick), then over the transfer (the pick's
+        # yaw to the place's, less the swing between them: the via-point turns with the
+        # swing). Without a vertical last axis, or without limits, the margin is inf.
+        home_yaw = self._home_yaw + _wrap(np.arctan2(*from_pick.T[::-1]) - self._home_azimuth)
+        to_pick = _wrap(yaw_pick - home_yaw)
+        p_to = p_place[:, :2] - base[:2]
+        swing = _wrap(np.arctan2(*p_to.T[::-1]) - np.arctan2(*from_pick.T[::-1]))
+        transfer = _wrap(np.arctan2(R_place[:, 1, 0], R_place[:, 0, 0]) - yaw_pick - swing)
+        travel = np.abs(to_pick) + np.abs(transfer)
+        margin = np.full(n, np.inf)
+        j = robot.n_joints - 1
+        if abs(self.wrist_axis_z) >= 0.5 and not robot.continuous[j]:
+            q_pick = robot.q_home[j] + to_pick / self.wrist_axis_z
+            q_place = q_pick + transfer / self.wrist_axis_z
+            qs = np.stack([q_pick, q_place])
+            margin = np.minimum(qs - robot.q_min[j], robot.q_max[j] - qs).min(axis=0)
+        r = X_WO_pick.apply(self.p_O_com) - p_pick
+        weight = np.array([0.0, 0.0, -sc.brick_mass * GRAVITY])
+        torque = np.abs(np.einsum("ni,ni->n", R_pick[:, :, 1], np.cross(r, weight)))
+        out = []
+        for i, g in enumerate(grasps):
+            problem = None
+            if far[i] > self.reach:
+                problem = (
+                    f"unreachable: the tool is {far[i]:.3f} m from the arm's first joint, beyond "
+                    f"its reach {self.reach:.3f} m (the sum of its link lengths)"
+                )
+            elif near[i] < clearance:
+                problem = "footprint"  # worded below, for the best-ranked only
+            out.append(
+                Ranked(
+                    g, problem, float(near[i]), float(margin[i]), float(travel[i]), float(torque[i])
+                )
+            )
+        out.sort(key=Ranked.key)
+        if out[0].problem == "footprint":
+            out[0] = replace(out[0], problem=self._footprint_text(X_WO_pick, X_WO_place, out[0]))
+        return out
+
+    def _footprint_text(self, X_WO_pick: SE3, X_WO_place: SE3, ranked: Ranked) -> str:
+        """The cheap footprint problem of a candidate, in words."""
+        g, clearance = ranked.grasp, self.preflight.config.clearance
+        X_WG_pick = X_WO_pick @ g.X_OG
+        base = self.scene.robot.p_W_base
+        X_WG_place = choose_place_pose(
+            X_WO_place, g.X_OG, swung_pose(X_WG_pick, X_WO_place.translation(), base)
+        )
+        for what, X, bin_ in (
+            ("pick", X_WG_pick, self.scene.source_bin),
+            ("place", X_WG_place, self.scene.target_bin),
+        ):
+            width = g.open_width if what == "pick" else self.config.open_width
+            found = self.hand.problem(X, width, bin_, clearance)
+            if found is not None:
+                return (
+                    f"{found.geom} of the hand open to {width * 1000:.0f} mm comes within "
+                    f"{found.distance * 1000:.1f} mm of {found.where} at the {what} (its "
+                    f"footprint; clearance {clearance * 1000:.0f} mm)"
+                )
+        return "the open hand's footprint"
+
+    def grasps(self) -> list[GraspCandidate]:
+        """The object's grasp candidates, in generation order (module docstring)."""
+        return list(
+            box_grasps(self.scene.brick_half_extents, self.config.open_width, self.pad_half_length)
+        )
 
     def timed_plan(
-        self, X_WO_pick: SE3, X_WO_place: SE3, X_OG: SE3
+        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate
     ) -> tuple[Plan, PreflightResult, str | None]:
         """One candidate: the path swept by the pre-flight, then (if it passes) timed by the
         robot's limits and pre-flighted again as timed.
@@ -220,7 +493,7 @@ class PickPlacePlanner:
             held); or, when the path sweep fails, the swept plan, the sweep's result (its first
             problem is on the path, whatever the timing) and None.
         """
-        path = self.make_plan(X_WO_pick, X_WO_place, X_OG, self.sweep_config)
+        path = self.make_plan(X_WO_pick, X_WO_place, grasp, self.sweep_config)
         swept = self.preflight.run(path, X_WO_pick, X_WO_place)
         if not swept.feasible:
             return path, swept, None
@@ -261,39 +534,25 @@ class PickPlacePlanner:
         self,
         X_WO_pick: SE3,
         X_WO_place: SE3,
-        X_OG: SE3 | None = None,
+        grasp: GraspCandidate | None = None,
         config: PlanConfig | None = None,
     ) -> Plan:
-        """The pick-and-place plan with grasp ``X_OG`` (default: the nearest-yaw grasp), timed
-        by Cartesian limits (``config``, default the planner's)."""
+        """The pick-and-place plan with ``grasp`` (default: the best-ranked one), the gripper
+        opened to the grasp's open width, timed by Cartesian limits (``config``, default the
+        planner's)."""
+        if grasp is None:
+            grasp = self.rank(X_WO_pick, X_WO_place)[0].grasp
+        config = replace(
+            config or self.config,
+            open_width=grasp.open_width,
+            release_width=self.config.open_width,  # the whole opening its open time spans
+        )
         return plan_pick_place(
             self.X_WG_home,
             X_WO_pick,
             X_WO_place,
             self.clearance_z,
-            config or self.config,
+            config,
             p_W_base=self.scene.robot.p_W_base,
-            X_OG=X_OG,
+            X_OG=grasp.X_OG,
         )
-
-    def grasps(self, X_WO_pick: SE3) -> Iterator[tuple[str, SE3]]:
-        """The candidate grasps X_OG in the planner's order, labelled by their turn."""
-        reference = swung_pose(self.X_WG_home, X_WO_pick.translation(), self.scene.robot.p_W_base)
-        yaw = yaw_of(reference.rotation())
-
-        def yaw_change(X_OG: SE3) -> float:
-            return abs(math.remainder(yaw_of((X_WO_pick @ X_OG).rotation()) - yaw, 2 * math.pi))
-
-        first, twin = top_down_grasps()
-        if yaw_change(twin) < yaw_change(first):
-            first, twin = twin, first
-        yield "across the width", first
-        yield "across the width, turned 180°", twin
-        quarter = SE3.from_rotation(SO3.from_z_radians(0.5 * math.pi))
-        turned, turned_twin = quarter @ first, quarter.inverse() @ first
-        if yaw_change(turned_twin) < yaw_change(turned):
-            turned, turned_twin = turned_twin, turned
-        width = brick_width_across(turned, self.scene.brick_half_extents)
-        if self.config.open_width >= width + 2.0 * self.preflight.config.clearance:
-            yield "across the length", turned
-            yield "across the length, turned 180°", turned_twin

@@ -15,7 +15,9 @@ predicts the commanded joint path, up to the coarser rate the pre-flight runs at
    geom (bins, floor, obstacles), at least :attr:`PreflightConfig.clearance` apart. MuJoCo's own
    collision detection (``mj_collision`` with geom margins) runs on a kinematic copy of the
    scene's model; the robot never collides with the brick there (the grasp is the physics'
-   job), and the held brick ignores the geoms it rests on at its start and goal poses.
+   job), and the held brick ignores the geoms it rests against at its start and goal poses:
+   those within the clearance of it there (the floor under it, a wall beside it), which the
+   plan leaves and reaches along straight vertical moves (lift, place).
 
 The first problem found ends the pre-flight; a plan without problems is feasible, and its
 margins over the whole plan are reported.
@@ -41,8 +43,6 @@ from pickplace.world.scene import Scene
 _WORLD_CONTYPE, _WORLD_CONAFFINITY = 1, 1 | 2
 _ROBOT_CONTYPE, _ROBOT_CONAFFINITY = 2, 0
 _BRICK_CONTYPE, _BRICK_CONAFFINITY = 4, 1
-# A brick geom within this distance of a world geom rests on it [m].
-_SUPPORT_DISTANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -381,8 +381,9 @@ class Preflight:
         mujoco.mj_collision(m, d)
 
     def _pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
-        """Per geom pair: 1 robot-world, 2 brick-world (not a geom it rests on at the start or
-        the end), 0 not checked; shape (ngeom, ngeom), symmetric."""
+        """Per geom pair: 1 robot-world, 2 brick-world (not a geom it rests against at the
+        start or the end: within the clearance of it there), 0 not checked; shape
+        (ngeom, ngeom), symmetric."""
         ng, sc = self.model.ngeom, self.scene
         robot, world = self._robot, self._world
         kinds = np.zeros((ng, ng), dtype=np.int8)
@@ -395,10 +396,10 @@ class Preflight:
             self._load(sc.robot.q_home, 0.0, X_WO)
             d, n = self.data, self.data.ncon
             g1, g2 = d.contact.geom1[:n], d.contact.geom2[:n]
-            near = d.contact.dist[:n] <= _SUPPORT_DISTANCE
+            near = d.contact.dist[:n] < self.config.clearance
             for a, b in zip(g1[near].tolist(), g2[near].tolist(), strict=True):
                 if brick in (a, b):
-                    kinds[a, b] = kinds[b, a] = 0  # the brick rests on it
+                    kinds[a, b] = kinds[b, a] = 0  # the brick rests against it
         return kinds
 
     def _closest(

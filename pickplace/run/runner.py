@@ -430,7 +430,8 @@ def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, T
         b = req.brick
         raise InvalidInputError(
             f"no feasible plan picks the brick at x={b.x:g} m, y={b.y:g} m, yaw={b.yaw:g} rad: "
-            f"{len(planning.candidates)} candidates tried, the first ({first.label}) {why}; "
+            f"{len(planning.candidates)} of {planning.ranked} candidates pre-flighted, the best "
+            f"({first.label}) {why}; "
             f"move it inwards or turn it (pickplace plan --brick={b.x:g},{b.y:g},{b.yaw:g} "
             "lists every candidate)",
             field="brick",

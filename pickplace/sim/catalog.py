@@ -48,6 +48,13 @@ CATALOG: dict[str, ScenarioInfo] = {
             random=True,
         ),
         ScenarioInfo(
+            "pick-place-uniform",
+            "brick x, y, yaw drawn from the seed uniformly over bin 1's valid poses and never "
+            "drawn again: measures how much of the bin is picked (success where a candidate is "
+            "feasible; else no-feasible-plan, naming the best candidate's problem)",
+            random=True,
+        ),
+        ScenarioInfo(
             "singular-reach",
             "tool pulled along a straight line past full arm stretch "
             "and back (qp stays within limits, pinv does not)",

@@ -289,7 +289,8 @@ class Simulation:
         if planning.chosen is None:
             self.fail(
                 FailureReason.NO_FEASIBLE_PLAN,
-                f"none of the {len(planning.candidates)} candidate plans is feasible",
+                f"none of the {len(planning.candidates)} candidate plans is feasible; "
+                f"{planning.refusal()}",
                 tick=0,
             )
             return

@@ -35,6 +35,7 @@ from pickplace.world.placements import (
     nominal_placement,
     random_placement,
     target_placement,
+    uniform_placement,
 )
 from pickplace.world.scene import Scene
 
@@ -290,6 +291,16 @@ def _random(req: BuildRequest) -> Task:
     )
 
 
+def _uniform(req: BuildRequest) -> Task:
+    """A brick pose drawn from the seed uniformly over bin 1's valid poses
+    (:func:`~pickplace.world.placements.uniform_placement`) and planned as drawn, never drawn
+    again: where no candidate is feasible the run ends ``no-feasible-plan`` before any physics,
+    naming the best candidate's first problem. A given ``--brick`` is planned as is.
+    """
+    rng = np.random.default_rng(req.seed)
+    return pick_place_task(req, req.brick or uniform_placement(req.scene, rng))
+
+
 def _reach(req: BuildRequest) -> Task:
     return singular_reach_task(req)
 
@@ -315,6 +326,7 @@ def _unreachable(req: BuildRequest) -> Task:
 BUILDERS: dict[str, Builder] = {
     "pick-place": _nominal,
     "pick-place-random": _random,
+    "pick-place-uniform": _uniform,
     "singular-reach": _reach,
     "fault-gripper-disabled": _with_fault(faults.GripperDisabled),
     "fault-brick-moved": _with_fault(faults.BrickMoved),

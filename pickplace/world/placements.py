@@ -86,6 +86,30 @@ def random_placement(scene: Scene, rng: np.random.Generator) -> BrickPlacement:
     return BrickPlacement(float(p_W[0]), float(p_W[1]), yaw)
 
 
+def uniform_placement(scene: Scene, rng: np.random.Generator) -> BrickPlacement:
+    """A pose drawn uniformly over every valid pose of the brick in bin 1: over the set of
+    (x, y, yaw) whose footprint lies inside the inner walls, by rejection.
+
+    x, y are drawn uniformly over the inner floor less the brick's smaller half size (no
+    valid centre lies outside that) and the yaw uniformly in [-π, π), until the footprint
+    lies inside (:func:`check_brick_in_source_bin`): every valid pose is equally likely,
+    unlike :func:`random_placement`, which weights each yaw equally however little room it
+    leaves. Whether it can be picked is not asked.
+    """
+    bin_ = scene.source_bin
+    half = bin_.inner_half_extents - float(np.min(scene.brick_half_extents[:2]))
+    while True:
+        u = rng.uniform(-half, half)
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        p_W = bin_.X_WB.apply(np.array([u[0], u[1], 0.0]))
+        p = BrickPlacement(float(p_W[0]), float(p_W[1]), yaw)
+        try:
+            check_brick_in_source_bin(scene, p)
+        except InvalidInputError:
+            continue
+        return p
+
+
 def yaw_of_bin(X_WB: SE3) -> float:
     """Rotation of a bin's frame about world z [rad]."""
     R = X_WB.rotation().as_matrix()

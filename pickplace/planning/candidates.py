@@ -1,0 +1,314 @@
+"""Grasp candidates from the object's box, and the cheap tests that rank them.
+
+Frames: O the object (a box, origin at its centre, lying flat: O's z up), G the tool site
+(origin midway between the pads, +z the approach out of the gripper, fingers closing along
+G's y), W the world, B a bin's frame.
+
+Candidates (:func:`box_grasps`): the pads on two opposite faces of the box (antipodal: the
+faces' normals are the closing axis), for each pair of side faces whose width plus
+:data:`PAD_CLEARANCE` on each side the gripper opens to:
+
+* the approach from straight down (``R_OG = Ry(π)`` across the width) tilted about the
+  closing axis by each angle of :data:`GRASP_TILTS`, either way: a rotation about the face
+  normal keeps the pads flat on the faces, and leans the palm away from one side;
+* the pads' centre offset along the face by each fraction of :data:`GRASP_OFFSET_FRACTIONS`
+  of the travel that keeps the pad on the face (half its length minus the pad's half size);
+* both wrist turns: ``X_OG`` and ``X_OG · Rz(π)``, the same pad placements with the fingers
+  swapped (the wrist turned half a turn about the approach axis).
+
+The cheap tests (:class:`HandFootprint`, :func:`gravity_torque`) need no IK: the open hand's
+collision boxes placed at the grasp against the bin's walls and floor, and the object's weight
+about the pad axis. The wrist's margin needs the arm, and is the planner's
+(:mod:`pickplace.planning.planner`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import numpy.typing as npt
+from mink.lie import SE3, SO3
+
+from pickplace.world.scene import BinGeometry
+
+PAD_CLEARANCE = 0.006
+"""Gap between each open pad and the object's face it closes on [m]: twice the 3 mm by which
+the tool arrives off the planned pick at full speed (:class:`~pickplace.planning.plan.PlanConfig`'s
+``settle_time``), so a pad never lands on the object's top. The gripper opens to the object's
+width plus this on each side, no wider: the less the fingers open, the nearer a wall the object
+can lie."""
+
+GRASP_TILTS = (0.0, math.radians(15.0), math.radians(30.0))
+"""Tilts of the approach from vertical about the closing axis [rad], each tried either way;
+vertical first. 30° leans the palm of every bundled gripper (its underside 45–95 mm above the
+tool site) 20 mm or more away from a wall the object touches."""
+
+GRASP_OFFSET_FRACTIONS = (0.0, 0.5, -0.5)
+"""Offsets of the pads' centre along the face, as fractions of the largest offset that keeps
+the pad on the face [-]; centred first."""
+
+GRAVITY = 9.81
+"""Standard gravity [m/s²]."""
+
+# The 12 edges of a box, as pairs of indices into its 8 corners (corner k has coordinate
+# signs given by the bits of k: bit 0 x, bit 1 y, bit 2 z).
+_BOX_EDGES = np.array(
+    [(a, a | bit) for a in range(8) for bit in (1, 2, 4) if not a & bit], dtype=np.intp
+)
+_CORNER_SIGNS = np.array(
+    [[1.0 if k & (1 << i) else -1.0 for i in range(3)] for k in range(8)], dtype=np.float64
+)
+
+
+@dataclass(frozen=True)
+class GraspCandidate:
+    """One way to grasp the object.
+
+    Attributes:
+        label: In words, e.g. ``"across the width, tilted 15°, turned 180°"``.
+        X_OG: The tool site in the object frame.
+        width: The object's width between the pads [m].
+        open_width: Finger gap commanded when open around it: ``width + 2 PAD_CLEARANCE`` [m].
+        tilt: Tilt of the approach from vertical about the closing axis [rad].
+        offset: Offset of the pads' centre along the face from the face's centre [m].
+        turned: The wrist turned half a turn (fingers swapped).
+    """
+
+    label: str
+    X_OG: SE3
+    width: float
+    open_width: float
+    tilt: float
+    offset: float
+    turned: bool
+
+
+def box_grasps(
+    half_extents: npt.ArrayLike,
+    max_open_width: float,
+    pad_half_length: float,
+    tilts: tuple[float, ...] = GRASP_TILTS,
+    offset_fractions: tuple[float, ...] = GRASP_OFFSET_FRACTIONS,
+) -> Iterator[GraspCandidate]:
+    """Antipodal grasps of a box lying flat, pads on a pair of its side faces (module docstring).
+
+    Across the width (O's y, ``R_OG = Ry(π)``: G's x = -O's x, G's y = O's y, G's z = -O's z)
+    first, then across the length (O's x, ``R_OG = Rz(π/2) Ry(π)``); each with every tilt
+    ``θ`` (``R_OG · Ry(±θ)``, G's y the closing axis), every offset ``s`` along the face
+    (``p_OG = s · x_G``, G's x horizontal in O), and both wrist turns.
+
+    Args:
+        half_extents: The box's half sizes along O's x, y, z [m].
+        max_open_width: Widest gap the gripper opens to [m].
+        pad_half_length: Half size of a pad along G's x [m] (along the face).
+        tilts: Tilts from vertical [rad], each tried either way (0 once).
+        offset_fractions: Offsets as fractions of the largest that keeps the pad on the face.
+
+    Yields:
+        The candidates, for each face pair whose width plus ``2 PAD_CLEARANCE`` is at most
+        ``max_open_width``.
+    """
+    h = np.asarray(half_extents, dtype=np.float64)
+    bases = (
+        ("across the width", 1, SO3.from_y_radians(math.pi)),
+        ("across the length", 0, SO3.from_z_radians(0.5 * math.pi) @ SO3.from_y_radians(math.pi)),
+    )
+    for name, axis, R_base in bases:
+        width = 2.0 * float(h[axis])
+        open_width = width + 2.0 * PAD_CLEARANCE
+        if open_width > max_open_width:
+            continue
+        x_O = R_base.as_matrix()[:, 0]  # G's x in O: along the face, horizontal
+        travel = max(0.0, float(np.abs(x_O) @ h) - pad_half_length)
+        signed_tilts = [0.0] + [s * t for t in tilts if t > 0.0 for s in (1.0, -1.0)]
+        for tilt in signed_tilts:
+            R_OG = R_base @ SO3.from_y_radians(tilt)
+            for fraction in offset_fractions:
+                offset = fraction * travel
+                if fraction and offset == 0.0:
+                    continue
+                X_OG = SE3.from_rotation_and_translation(R_OG, offset * x_O)
+                for turned in (False, True):
+                    X = X_OG @ SE3.from_rotation(SO3.from_z_radians(math.pi)) if turned else X_OG
+                    yield GraspCandidate(
+                        _label(name, tilt, offset, turned),
+                        X,
+                        width,
+                        open_width,
+                        tilt,
+                        offset,
+                        turned,
+                    )
+
+
+def _label(name: str, tilt: float, offset: float, turned: bool) -> str:
+    parts = [name]
+    if tilt:
+        parts.append(f"tilted {math.degrees(tilt):+.0f}°")
+    if offset:
+        parts.append(f"off-centre {offset * 1000:+.0f} mm")
+    if turned:
+        parts.append("turned 180°")
+    return ", ".join(parts)
+
+
+def gravity_torque(X_WO: SE3, X_OG: SE3, p_O_com: npt.ArrayLike, mass: float) -> float:
+    """Torque of the object's weight about the pad axis [N m]: ``|y_G · (r × F)|`` with ``r``
+    the centre of mass from the tool site and ``F = -m g z_W``.
+
+    Args:
+        X_WO: The object's pose.
+        X_OG: The grasp.
+        p_O_com: Centre of mass in O [m].
+        mass: Mass [kg].
+    """
+    X_WG = X_WO @ X_OG
+    r = X_WO.apply(np.asarray(p_O_com, dtype=np.float64)) - X_WG.translation()
+    force = np.array([0.0, 0.0, -mass * GRAVITY])
+    y_W = X_WG.rotation().as_matrix()[:, 1]
+    return float(abs(y_W @ np.cross(r, force)))
+
+
+@dataclass(frozen=True)
+class FootprintProblem:
+    """Where the open hand meets a bin, at its worst point.
+
+    Attributes:
+        geom: The hand's geom.
+        where: ``"the floor"`` or the wall, e.g. ``"bin1's -y wall"``.
+        distance: The point's distance from it [m] (negative: inside it).
+        point_W: The point [m].
+    """
+
+    geom: str
+    where: str
+    distance: float
+    point_W: tuple[float, float, float]
+
+
+class HandFootprint:
+    """The open hand's collision geoms as boxes in the tool frame, at any open width.
+
+    Each geom's bounding box in its own frame (MuJoCo's ``geom_aabb``: exact for a box,
+    enclosing for a mesh, capsule or cylinder) is taken into G with the fingers at the width
+    (:meth:`~pickplace.robot.model.Robot.qpos_for_width`), once per width.
+
+    Args:
+        model: A kinematic copy of the scene's model (never stepped).
+        geom_ids: The hand's collision geoms.
+        names: Their names.
+        tool_site_id: The tool site G.
+        gripper_qpos_adr: qpos addresses of the gripper's joints.
+        qpos_for_width: Gripper joint positions for a finger gap [m].
+        q_arm: Any arm posture, with its qpos addresses (G moves with the hand).
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        geom_ids: npt.ArrayLike,
+        names: list[str],
+        tool_site_id: int,
+        gripper_qpos_adr: np.ndarray,
+        qpos_for_width: Callable[[float], np.ndarray],
+        q_arm: tuple[np.ndarray, np.ndarray],
+    ) -> None:
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.geom_ids = np.asarray(geom_ids, dtype=np.intp)
+        self.names = names
+        self.tool_site_id = tool_site_id
+        self.gripper_qpos_adr = gripper_qpos_adr
+        self.qpos_for_width = qpos_for_width
+        adr, q = q_arm
+        self.data.qpos[adr] = q
+        self._corners: dict[float, np.ndarray] = {}
+
+    def corners_G(self, width: float) -> np.ndarray:
+        """Corners of every geom's box in G with the fingers at gap ``width`` [m], (k, 8, 3)."""
+        cached = self._corners.get(width)
+        if cached is not None:
+            return cached
+        m, d = self.model, self.data
+        d.qpos[self.gripper_qpos_adr] = self.qpos_for_width(width)
+        mujoco.mj_kinematics(m, d)
+        R_WG = d.site_xmat[self.tool_site_id].reshape(3, 3)
+        p_WG = d.site_xpos[self.tool_site_id]
+        g = self.geom_ids
+        aabb = m.geom_aabb[g]  # (k, 6): centre and half sizes in the geom frame
+        local = aabb[:, None, :3] + _CORNER_SIGNS[None] * aabb[:, None, 3:]  # (k, 8, 3)
+        R_Wg = d.geom_xmat[g].reshape(-1, 3, 3)
+        p_W = np.einsum("kij,knj->kni", R_Wg, local) + d.geom_xpos[g][:, None, :]
+        corners = (p_W - p_WG) @ R_WG  # R_WGᵀ (p_W − p_WG), row-wise
+        self._corners[width] = corners
+        return corners
+
+    def distances(
+        self, R_BG: np.ndarray, p_BG: np.ndarray, width: float, bin_: BinGeometry
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The open hand at ``n`` tool poses in a bin's frame B: each pose's smallest distance
+        to the bin's floor or inner walls [m].
+
+        Below the walls' top, each geom's box (clipped at the top's plane: the corners below
+        it and the points where its edges cross it) must lie inside the inner walls; a convex
+        box lies inside the convex inner prism exactly when those points do. Every corner must
+        lie above the floor.
+
+        Args:
+            R_BG: Tool orientations in B, (n, 3, 3).
+            p_BG: Tool positions in B [m], (n, 3).
+            width: Finger gap [m].
+            bin_: The bin.
+
+        Returns:
+            Per pose the smallest distance [m] (negative: into a wall or the floor), the geom
+            index (into the hand's geoms) and the point in B [m], shapes (n,), (n,), (n, 3).
+        """
+        P_G = self.corners_G(width)  # (k, 8, 3)
+        P = np.einsum("nij,kcj->nkci", R_BG, P_G) + p_BG[:, None, None, :]  # (n, k, 8, 3)
+        floor_z = float(bin_.to_bin_frame(bin_.center_W)[2])
+        top_z = floor_z + bin_.wall_top_z - bin_.floor_top_z
+        z = P[..., 2]
+        A, Bp = P[:, :, _BOX_EDGES[:, 0]], P[:, :, _BOX_EDGES[:, 1]]  # (n, k, 12, 3)
+        za, zb = A[..., 2] - top_z, Bp[..., 2] - top_z
+        crossing = za * zb < 0.0
+        t = np.where(crossing, za / np.where(crossing, za - zb, 1.0), 0.0)
+        pts = np.concatenate([P, A + t[..., None] * (Bp - A)], axis=2)  # (n, k, 20, 3)
+        below = np.concatenate([z < top_z, crossing], axis=2)
+        half = bin_.inner_half_extents
+        wall = (half - np.abs(pts[..., :2])).min(axis=-1)
+        gap = np.where(below, wall, np.inf)
+        floor = z - floor_z
+        gap[..., :8] = np.minimum(gap[..., :8], floor)
+        n = len(R_BG)
+        flat = gap.reshape(n, -1)
+        idx = np.argmin(flat, axis=1)
+        rows = np.arange(n)
+        k, c = np.unravel_index(idx, gap.shape[1:])
+        return flat[rows, idx], k, pts[rows, k, c]
+
+    def problem(
+        self, X_WG: SE3, width: float, bin_: BinGeometry, clearance: float
+    ) -> FootprintProblem | None:
+        """The open hand at ``X_WG`` against ``bin_`` (:meth:`distances`): its worst point
+        when nearer than ``clearance`` [m] to the floor or a wall, else None."""
+        R_BW = bin_.X_WB.inverse().rotation().as_matrix()
+        R_BG = (R_BW @ X_WG.rotation().as_matrix())[None]
+        p_BG = bin_.to_bin_frame(X_WG.translation())[None]
+        distance, k, p_B = (a[0] for a in self.distances(R_BG, p_BG, width, bin_))
+        if distance >= clearance:
+            return None
+        floor_z = float(bin_.to_bin_frame(bin_.center_W)[2])
+        half = bin_.inner_half_extents
+        if p_B[2] - floor_z <= float((half - np.abs(p_B[:2])).min()):
+            where = f"{bin_.name}'s floor"
+        else:
+            a = int(np.argmin(half - np.abs(p_B[:2])))
+            where = f"{bin_.name}'s {'+' if p_B[a] > 0 else '-'}{'xy'[a]} wall"
+        p_W = bin_.X_WB.apply(p_B)
+        point = (float(p_W[0]), float(p_W[1]), float(p_W[2]))
+        return FootprintProblem(self.names[int(k)], where, float(distance), point)
