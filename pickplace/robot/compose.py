@@ -7,8 +7,9 @@ tool site, stiff pads, one pad–brick contact sensor per pad and a ``home`` key
 :func:`load_robot` compiles it and resolves a :class:`Robot`: ids, limits, home posture,
 gripper commands and measurements, everything sized from the loaded robot.
 
-Gripper calibrations are cached per process by the content of the gripper file, its assets,
-the description's gripper fields, the brick and the physics options.
+Gripper calibrations are cached per process and on disk
+(:mod:`pickplace.robot.calibration_cache`) by the content of the gripper file, its assets,
+the description's gripper fields, the brick, the physics options and the measuring code.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
+from pickplace.robot import calibration_cache
 from pickplace.geometry import rotate_by_quat
 from pickplace.robot.calibration import (
     GRIPPER_PREFIX,
@@ -103,6 +105,7 @@ def _calibration_key(
         digest,
         repr((g.pads, g.tcp, g.open_command, g.closed_command, g.couple_fingers)),
         repr(squeeze_ratio),
+        calibration_cache.code_digest(),
         repr(half.tolist()),
         repr(friction.tolist()),
         repr(opts),
@@ -121,7 +124,7 @@ def _calibrated(
 ) -> GripperCalibration:
     """The gripper's calibration, from the cache or measured (and then cached)."""
     key = _calibration_key(digest, desc, half, friction, options, squeeze_ratio)
-    calibration = _CALIBRATIONS.get(key)
+    calibration = _CALIBRATIONS.get(key) or calibration_cache.load(key)
     if calibration is not None:
         _CALIBRATIONS[key] = calibration
         return calibration
@@ -147,6 +150,7 @@ def _calibrated(
         ),
     )
     _CALIBRATIONS[key] = calibration
+    calibration_cache.store(key, calibration)
     return calibration
 
 
