@@ -36,9 +36,7 @@ CODE_FILES = ("calibration.py", "parts.py", "physics.py", "mjcf.py", "calibratio
 """The modules of ``pickplace/robot`` whose source is part of every key."""
 
 _ARRAYS = {
-    f.name
-    for f in dataclasses.fields(GripperCalibration)
-    if f.type in ("np.ndarray", np.ndarray)
+    f.name for f in dataclasses.fields(GripperCalibration) if f.type in ("np.ndarray", np.ndarray)
 }
 _ARRAY_PAIRS = {"pad_faces"}
 _STRING_TUPLES = {"actuators", "joints", "other_contacts", "footprint_geoms"}

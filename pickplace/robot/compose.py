@@ -23,8 +23,8 @@ import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
-from pickplace.robot import calibration_cache
 from pickplace.geometry import rotate_by_quat
+from pickplace.robot import calibration_cache
 from pickplace.robot.calibration import (
     GRIPPER_PREFIX,
     CalibrationOptions,

@@ -202,8 +202,8 @@ def _hand_below(
     joints = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joint_ids}
     arm_only = _arm_only_files(part.path, joints)
     hint = (
-        f"the arm-only file beside it ({', '.join(arm_only)}) as [arm] mjcf, with this hand's "
-        f"file as [gripper] mjcf"
+        f"the arm-only file beside it ({', '.join(arm_only)}) as [arm] mjcf, and the "
+        f"hand's own file as [gripper] mjcf"
         if arm_only
         else "an arm file without the hand as [arm] mjcf, and the hand's own file as [gripper] mjcf"
     )
@@ -237,9 +237,9 @@ def _lowest_swivel_point(model: mujoco.MjModel, base_quat: np.ndarray) -> tuple[
     """See :attr:`PreparedArm.lowest_z`: (height [m], geom name) at the file's own posture."""
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
-    R0 = np.zeros(9)
-    mujoco.mju_quat2Mat(R0, base_quat)
-    R0 = R0.reshape(3, 3)
+    flat = np.zeros(9)
+    mujoco.mju_quat2Mat(flat, base_quat)
+    R0 = flat.reshape(3, 3)
     level = np.zeros(model.nbody, dtype=bool)  # no joint above it changes its height
     moves = np.zeros(model.nbody, dtype=bool)  # some joint above it moves it
     level[0] = True
