@@ -41,9 +41,14 @@ timestep and solver options. Then:
    less);
    both times are multiples of :data:`ACTION_RESOLUTION`, found by doubling and bisection.
 
-Each stage waits until the gripper's velocities fall below :data:`SETTLED_SPEED`, for at most
-:data:`MAX_SETTLE_TIME`; a gripper still faster than :data:`STILL_MOVING` then is an error
-(contacts and soft loop constraints of a linkage creep at ~1e-5 for seconds; that is at rest).
+Each stage waits until the gripper is at rest: its velocities below :data:`SETTLED_SPEED`, or
+below :data:`STILL_MOVING` at :data:`REST_TIME` (contacts and soft loop constraints of a linkage
+creep at ~1e-5 for seconds; that is at rest). A gripper still moving then is judged by what a
+grasp needs: the stage ends once the fingers' geoms and each side's force on a box change by less
+than their tolerances over :data:`SETTLE_WINDOW` — :data:`POSITION_TOLERANCE` of the gripper's
+stroke, :data:`FORCE_TOLERANCE` of the force — so that a linkage whose followers creep while
+its pads stand still (Robotiq's 2F-85 squeezing a box: 0.004–0.009 rad/s) is measured; not
+steady by :data:`MAX_SETTLE_TIME` is an error naming what still changes and by how much.
 """
 
 from __future__ import annotations
@@ -69,11 +74,27 @@ SETTLED_SPEED = 1e-6
 MIN_SETTLE_TIME = 0.06
 """... after at least this long [s] ..."""
 
-MAX_SETTLE_TIME = 1.5
-"""... or after this long [s] ..."""
+REST_TIME = 1.5
+"""... or at this time [s] every joint slower than ..."""
 
 STILL_MOVING = 1e-3
-"""... when a joint faster than this [m/s or rad/s] fails the calibration."""
+"""... this [m/s or rad/s]; else, from then on, the stage ends when what a grasp needs is steady:"""
+
+SETTLE_WINDOW = 0.05
+"""Steady means changed by less than the tolerances over this long [s] (whole 20 ms chunks):"""
+
+POSITION_TOLERANCE = 1e-3
+"""Each finger geom's centre by this share of the gripper's stroke (of its size before the
+stroke is measured): 0.085 mm per 50 ms for an 85 mm stroke ..."""
+
+FORCE_TOLERANCE = 0.01
+"""... and each side's normal force on a box by this share of it ..."""
+
+FORCE_FLOOR = 1e-3
+"""... or by this [N], whichever is more (a side that touches nothing)."""
+
+MAX_SETTLE_TIME = 8.0
+"""A stage not steady after this long [s] fails the calibration."""
 
 PAD_ITERATIONS = 4
 """Rounds of "close on a brick centred between the pads found so far" before pads are final."""
@@ -313,16 +334,71 @@ class _Rig:
         )
         self.sim_time = 0.0
         mujoco.mj_forward(m, self.data)
+        self.finger_geoms = self.geoms[self.moving_body[m.geom_bodyid[self.geoms]]]
+        reach = (
+            np.linalg.norm(self.geom_centres_B()[self.geoms], axis=1) + m.geom_rbound[self.geoms]
+        )
+        self.scale = float(reach.max()) if reach.size else 0.1
+        self.scale_label = f"size ({1000 * self.scale:.0f} mm)"
+        self.placed: dict[str, bool] = {}
+        self.sides: dict[int, int] = {}
+
+    def set_stroke(self, stroke: float, sides: dict[int, int]) -> None:
+        """The fingers' stroke [m] (scale of the position tolerance) and each finger geom's
+        side (+1 / -1), once measured."""
+        if stroke > 0.0:
+            self.scale = stroke
+            self.scale_label = f"stroke ({1000 * stroke:.1f} mm)"
+        self.sides = dict(sides)
 
     def name(self, geom: int) -> str:
         full = mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, geom) or f"#{geom}"
         return full.removeprefix(GRIPPER_PREFIX)
 
+    def watched(self) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """What a grasp needs steady, its tolerances per :data:`SETTLE_WINDOW`, and labels.
+
+        The centres of the fingers' collision geoms in B (tolerance
+        :data:`POSITION_TOLERANCE` of :attr:`scale`: the gripper's stroke once known, its
+        size before) and, while a box is placed, the normal force each side presses on it
+        with (tolerance :data:`FORCE_TOLERANCE` of that force, at least
+        :data:`FORCE_FLOOR`). Joint angles are not watched: a linkage's followers may creep
+        while the fingers and the squeeze stand still.
+        """
+        centres = self.geom_centres_B()[self.finger_geoms].reshape(-1)
+        values = [centres]
+        tols = [np.full(centres.size, POSITION_TOLERANCE * self.scale)]
+        labels = [f"{self.name(int(g))} position" for g in self.finger_geoms for _ in range(3)]
+        for which in self.box_geoms:
+            if not self.placed.get(which):
+                continue
+            forces = self.box_contacts(which)
+            per_side = np.array(
+                [
+                    sum(f for g, f in forces.items() if self.sides.get(g, 1) == side)
+                    for side in (1, -1)
+                ]
+            )
+            values.append(per_side)
+            tols.append(np.maximum(FORCE_TOLERANCE * np.abs(per_side), FORCE_FLOOR))
+            labels += [f"force on the {which} (+y side)", f"force on the {which} (-y side)"]
+        return np.concatenate(values), np.concatenate(tols), labels
+
     def settle(self, ctrl: np.ndarray, what: str) -> None:
+        """Hold ``ctrl`` until the gripper is at rest, or what a grasp needs is steady.
+
+        At rest: every joint slower than :data:`SETTLED_SPEED` after :data:`MIN_SETTLE_TIME`
+        (or slower than :data:`STILL_MOVING` at :data:`REST_TIME`). From :data:`REST_TIME`
+        on, steady is enough: :meth:`watched` changed by less than its tolerances over the
+        last :data:`SETTLE_WINDOW`. Not steady by :data:`MAX_SETTLE_TIME` is an error
+        naming what still changes.
+        """
         m, d = self.model, self.data
         d.ctrl[self.acts] = ctrl
         chunk = max(1, round(0.02 / m.opt.timestep))
+        window = max(1, math.ceil(SETTLE_WINDOW / (chunk * m.opt.timestep)))
         t0 = d.time
+        history: list[np.ndarray] = []
         while True:
             mujoco.mj_step(m, d, nstep=chunk)
             if not np.all(np.isfinite(d.qvel)):
@@ -332,17 +408,37 @@ class _Rig:
                     f"at timestep {m.opt.timestep:g} s (check masses, armature, gains)",
                 )
             elapsed = d.time - t0
-            if elapsed >= MIN_SETTLE_TIME and np.max(np.abs(d.qvel)) < SETTLED_SPEED:
+            fastest = float(np.max(np.abs(d.qvel))) if d.qvel.size else 0.0
+            if elapsed >= MIN_SETTLE_TIME and fastest < SETTLED_SPEED:
+                break
+            if elapsed < REST_TIME - 1e-9:
+                continue
+            if not history and fastest < STILL_MOVING:
+                break
+            values, tols, labels = self.watched()
+            history.append(values)
+            if len(history) <= window:
+                continue
+            change = np.abs(values - history[-1 - window])
+            if np.all(change <= tols):
                 break
             if elapsed >= MAX_SETTLE_TIME:
-                fastest = float(np.max(np.abs(d.qvel)))
-                if fastest < STILL_MOVING:
-                    break
+                k = int(np.argmax(change / tols))
+                force = "force" in labels[k]
+                unit, scale = ("N", 1.0) if force else ("mm", 1000.0)
+                basis = (
+                    f"{100 * FORCE_TOLERANCE:g} % of it"
+                    if force
+                    else f"{100 * POSITION_TOLERANCE:g} % of the gripper's {self.scale_label}"
+                )
                 raise _Problem(
                     "mjcf",
-                    f"the gripper does not come to rest while {what} (still {fastest:.3g} m/s or "
-                    f"rad/s after {MAX_SETTLE_TIME:g} s); valid: a gripper whose fingers settle "
-                    f"(damped joints, no self-excited linkage)",
+                    f"the gripper does not settle while {what}: after {MAX_SETTLE_TIME:g} s the "
+                    f"{labels[k]} still changes by {scale * change[k]:.3g} {unit} per "
+                    f"{1000 * window * chunk * m.opt.timestep:.0f} ms (tolerance "
+                    f"{scale * tols[k]:.3g} {unit}, {basis}); valid: fingers and a squeeze that "
+                    f"come to rest (damped finger joints), or set [gripper] closed_command to "
+                    f"a gentler squeeze",
                 )
         self.sim_time += d.time - t0
 
@@ -381,7 +477,8 @@ class _Rig:
         m, d = self.model, self.data
         for k, (name, geom) in enumerate(self.box_geoms.items()):
             mocap = int(m.body_mocapid[m.geom_bodyid[geom]])
-            if name != which or pos_B is None or R_B is None:
+            self.placed[name] = name == which and pos_B is not None and R_B is not None
+            if not self.placed[name]:
                 d.mocap_pos[mocap] = [0.0, 0.0, -10.0 - k]
                 continue
             p, R = self.root_pose()
@@ -888,6 +985,7 @@ def _calibrate(
     c_open = rig.geom_centres_B()
     open_state = rig.state()
     axes = _axes(rig, c_open, c_closed, tcp)
+    rig.set_stroke(2.0 * max(axes.travel.values()), axes.side)
 
     tcp_B = None
     if tcp is not None and tcp.site is not None:

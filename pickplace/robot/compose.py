@@ -7,12 +7,14 @@ tool site, stiff pads, one pad–brick contact sensor per pad and a ``home`` key
 :func:`load_robot` compiles it and resolves a :class:`Robot`: ids, limits, home posture,
 gripper commands and measurements, everything sized from the loaded robot.
 
-Gripper calibrations are cached per process by the content of the gripper file, its assets,
-the description's gripper fields, the brick and the physics options.
+Gripper calibrations are cached per process and on disk
+(:mod:`pickplace.robot.calibration_cache`) by the content of the gripper file, its assets,
+the description's gripper fields, the brick, the physics options and the measuring code.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +24,7 @@ import numpy as np
 
 from pickplace.errors import RobotError
 from pickplace.geometry import rotate_by_quat
+from pickplace.robot import calibration_cache
 from pickplace.robot.calibration import (
     GRIPPER_PREFIX,
     CalibrationOptions,
@@ -33,7 +36,7 @@ from pickplace.robot.home_ik import home_candidates
 from pickplace.robot.mjcf import load_part, parse_world
 from pickplace.robot.model import Composition, Robot
 from pickplace.robot.parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
-from pickplace.robot.physics import set_stiff_pad, unique_name
+from pickplace.robot.physics import scale_squeeze, set_stiff_pad, unique_name
 from pickplace.robot.registry import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
 
 ARM_PREFIX = "arm/"
@@ -95,16 +98,92 @@ def _calibration_key(
     half: np.ndarray,
     friction: np.ndarray,
     opts: CalibrationOptions,
+    squeeze_ratio: float = 1.0,
 ) -> str:
     g = desc.gripper
     parts = [
         digest,
         repr((g.pads, g.tcp, g.open_command, g.closed_command, g.couple_fingers)),
+        repr(squeeze_ratio),
+        calibration_cache.code_digest(),
         repr(half.tolist()),
         repr(friction.tolist()),
         repr(opts),
     ]
     return hashlib.sha256("|".join(parts).encode()).hexdigest()
+
+
+def _calibrated(
+    gripper: PreparedGripper,
+    digest: str,
+    desc: RobotDescription,
+    half: np.ndarray,
+    friction: np.ndarray,
+    options: CalibrationOptions,
+    squeeze_ratio: float = 1.0,
+) -> GripperCalibration:
+    """The gripper's calibration, from the cache or measured (and then cached)."""
+    key = _calibration_key(digest, desc, half, friction, options, squeeze_ratio)
+    calibration = _CALIBRATIONS.get(key) or calibration_cache.load(key)
+    if calibration is not None:
+        _CALIBRATIONS[key] = calibration
+        return calibration
+    src = str(desc.source)
+    g = desc.gripper
+    calibration = calibrate_gripper(
+        gripper,
+        half,
+        friction,
+        options,
+        src=src,
+        pads=g.pads,
+        tcp=g.tcp,
+        open_command=(
+            None
+            if g.open_command is None
+            else gripper.commands_from_file(g.open_command, "open_command", src)
+        ),
+        closed_command=(
+            None
+            if g.closed_command is None
+            else gripper.commands_from_file(g.closed_command, "closed_command", src)
+        ),
+    )
+    _CALIBRATIONS[key] = calibration
+    calibration_cache.store(key, calibration)
+    return calibration
+
+
+ARM_FLOOR_CLEARANCE = 0.01
+"""Without ``[arm] base_pos`` the arm stands at the origin, raised until the geoms that swivel
+with its base joints (:attr:`PreparedArm.lowest_z`) are this far above the floor [m]: twice
+the planner's 5 mm collision clearance. (Geoms welded to the base never collide with the
+world, MuJoCo skips bodies welded together, so a base plate may rest on the floor.)"""
+
+
+def _floor_z(spec: mujoco.MjSpec) -> float:
+    """Height [m] of the world's floor: its highest upward plane geom, -inf without one."""
+    heights = [
+        float(g.pos[2])
+        for g in spec.worldbody.geoms
+        if g.type == mujoco.mjtGeom.mjGEOM_PLANE and abs(abs(float(g.quat[0])) - 1.0) < 1e-9
+    ]
+    return max(heights, default=-np.inf)
+
+
+def _base_pos(
+    spec: mujoco.MjSpec, arm: PreparedArm, desc: RobotDescription
+) -> tuple[np.ndarray, str]:
+    """The arm's base position [m] and, when it was raised off the floor, that in one line."""
+    if desc.arm.base_pos is not None:
+        return np.array(desc.arm.base_pos), ""
+    lift = _floor_z(spec) + ARM_FLOOR_CLEARANCE - arm.lowest_z
+    if not np.isfinite(lift) or lift <= 0.0:
+        return np.zeros(3), ""
+    return np.array([0.0, 0.0, lift]), (
+        f"arm base raised {1000 * lift:.1f} mm off the origin so that '{arm.lowest_geom}' "
+        f"clears the floor by {1000 * ARM_FLOOR_CLEARANCE:g} mm (set [arm] base_pos to choose)"
+    )
 
 
 def _mount_pose(arm: PreparedArm, desc: RobotDescription) -> tuple[np.ndarray, np.ndarray]:
@@ -144,31 +223,26 @@ def _compose(
     arm = prepare_arm(arm_part, desc, options.timestep)
     gripper = prepare_gripper(grip_part, desc)
 
-    key = _calibration_key(grip_part.digest, desc, half, friction, options)
-    calibration = _CALIBRATIONS.get(key)
-    if calibration is None:
-        src = str(desc.source)
-        g = desc.gripper
-        calibration = calibrate_gripper(
+    calibration = _calibrated(gripper, grip_part.digest, desc, half, friction, options)
+    if desc.gripper.squeeze_force is not None:
+        # The squeeze the description asks for: the actuators scaled by it over what the
+        # file's squeeze measures, then the gripper measured again as it will run.
+        ratio = desc.gripper.squeeze_force / calibration.squeeze_force
+        scaled = gripper.spec.copy()
+        scale_squeeze(scaled, ratio)
+        gripper = dataclasses.replace(
             gripper,
-            half,
-            friction,
-            options,
-            src=src,
-            pads=g.pads,
-            tcp=g.tcp,
-            open_command=(
-                None
-                if g.open_command is None
-                else gripper.commands_from_file(g.open_command, "open_command", src)
-            ),
-            closed_command=(
-                None
-                if g.closed_command is None
-                else gripper.commands_from_file(g.closed_command, "closed_command", src)
+            spec=scaled,
+            repairs=(
+                *gripper.repairs,
+                f"squeeze {calibration.squeeze_force:.3g} N per jaw scaled to "
+                f"{desc.gripper.squeeze_force:g} N ([gripper] squeeze_force): actuator "
+                f"force ranges x {ratio:.3g}" + (f", gains x {ratio:.3g}" if ratio > 1 else ""),
             ),
         )
-        _CALIBRATIONS[key] = calibration
+        calibration = _calibrated(
+            gripper, grip_part.digest, desc, half, friction, options, squeeze_ratio=ratio
+        )
 
     gspec = gripper.spec.copy()
     for pad in calibration.pads[0] + calibration.pads[1]:
@@ -183,7 +257,9 @@ def _compose(
         group=1,
     )
 
-    spec.attach(arm.spec.copy(), prefix=ARM_PREFIX, frame=spec.worldbody.add_frame())
+    base_pos, base_note = _base_pos(spec, arm, desc)
+    base = spec.worldbody.add_frame(pos=list(base_pos), quat=list(desc.arm.base_quat))
+    spec.attach(arm.spec.copy(), prefix=ARM_PREFIX, frame=base)
     flange = spec.body(ARM_PREFIX + arm.flange_body)
     pos, quat = _mount_pose(arm, desc)
     spec.attach(gspec, prefix=GRIPPER_PREFIX, frame=flange.add_frame(pos=pos, quat=quat))
@@ -211,6 +287,7 @@ def _compose(
         sensors.append(tuple(names))
     repairs = tuple(
         [f"{arm_part.path.name}: {r}" for r in arm_part.repairs + arm.repairs]
+        + ([f"{arm_part.path.name}: {base_note}"] if base_note else [])
         + [f"{grip_part.path.name}: {r}" for r in grip_part.repairs + gripper.repairs]
     )
     return _Composed(

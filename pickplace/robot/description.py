@@ -8,11 +8,13 @@ pipeline needs is read from the files or measured in simulation (``pickplace.rob
     name = "my-arm"                    # shown in summaries and recordings
     [arm]
     mjcf = "arm.xml"                   # path relative to this file
-    flange = "hand_mount"              # body or site where the gripper goes
+    flange = "hand_mount"              # optional: body or site where the gripper goes
     speed_limits = [2.1, 2.1, 2.1, 2.1, 2.6, 2.6, 2.6]   # rad/s, one per arm joint (required)
     accel_limits = [15, 7.5, 10, 12.5, 15, 20, 20]       # rad/s², optional
     home = [0, 0.3, 0, -1.8, 0, 2.1, 0.8]                # rad, optional (else found by IK)
     angle = "radian"                   # optional: units of a file without <compiler angle>
+    base_pos = [0, 0, 0.1]             # optional: the arm's root in the world [m]
+    base_quat = [1, 0, 0, 0]           # optional, wxyz
     [gripper]
     mjcf = "gripper.xml"
     mount_pos = [0, 0, 0]              # optional placement on the flange [m]
@@ -24,7 +26,8 @@ pipeline needs is read from the files or measured in simulation (``pickplace.rob
     # tcp = { pos = [0, 0, 0.1], quat = [1, 0, 0, 0] }   # in the gripper's root body frame
     open_command = [0.08]                     # one value per gripper actuator (file order)
     closed_command = [0.0]
-    grip_force = 40.0                         # squeeze per jaw [N]
+    grip_force = 40.0                         # squeeze per jaw grasps are judged by [N]
+    squeeze_force = 20.0                      # squeeze per jaw the actuators get [N]
     couple_fingers = true                     # couple independent fingers (default true)
 
 Every bad field raises :class:`~pickplace.errors.RobotError` with one line naming the file, the
@@ -57,7 +60,16 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 """A robot name: letters, digits, '.', '_' and '-' (it appears in recording paths)."""
 
 _TOP_KEYS = ("name", "arm", "gripper")
-_ARM_KEYS = ("mjcf", "flange", "speed_limits", "accel_limits", "home", "angle")
+_ARM_KEYS = (
+    "mjcf",
+    "flange",
+    "speed_limits",
+    "accel_limits",
+    "home",
+    "angle",
+    "base_pos",
+    "base_quat",
+)
 _GRIPPER_KEYS = (
     "mjcf",
     "mount_pos",
@@ -68,6 +80,7 @@ _GRIPPER_KEYS = (
     "open_command",
     "closed_command",
     "grip_force",
+    "squeeze_force",
     "couple_fingers",
 )
 _TCP_KEYS = ("pos", "quat")
@@ -185,19 +198,25 @@ class ArmDescription:
 
     Attributes:
         mjcf: The arm's MJCF file (resolved).
-        flange: Body or site of the arm file where the gripper goes.
+        flange: Body or site of the arm file where the gripper goes, or None: the site
+            ``attachment_site`` if the file has one, else the last body of the chain.
         speed_limits: Joint speed limits [rad/s], one per arm joint, root to flange.
         accel_limits: Joint acceleration limits [rad/s²], or None.
         home: Home posture [rad], or None (then found by IK).
         angle: Units of a file without ``<compiler angle>``, or None.
+        base_pos: Position of the arm's root frame in the world [m], or None: at the origin,
+            raised just enough that no geom of its base touches the floor.
+        base_quat: Orientation (wxyz, unit) of the arm's root frame in the world.
     """
 
     mjcf: Path
-    flange: str
+    flange: str | None
     speed_limits: tuple[float, ...]
     accel_limits: tuple[float, ...] | None = None
     home: tuple[float, ...] | None = None
     angle: str | None = None
+    base_pos: tuple[float, float, float] | None = None
+    base_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -214,6 +233,9 @@ class GripperDescription:
         open_command: Open command, one value per actuator of the gripper file, or None.
         closed_command: Closed command, likewise, or None.
         grip_force: Squeeze per jaw [N] to judge grasps against, or None (measured).
+        squeeze_force: Squeeze per jaw [N] the gripper is given, or None (its files'): the
+            actuators' force ranges scale by it over the measured squeeze, their gains too
+            when it is larger (as ``--vary grip_force`` does), before calibration.
         couple_fingers: Couple independently actuated fingers (tendon + joint equality).
     """
 
@@ -226,6 +248,7 @@ class GripperDescription:
     open_command: tuple[float, ...] | None = None
     closed_command: tuple[float, ...] | None = None
     grip_force: float | None = None
+    squeeze_force: float | None = None
     couple_fingers: bool = True
 
 
@@ -305,11 +328,11 @@ class RobotDescription:
 
 def _parse_arm(source: Path, t: Mapping[str, Any]) -> ArmDescription:
     _check_keys(source, "arm", t, _ARM_KEYS)
-    for key in ("mjcf", "flange", "speed_limits"):
+    for key in ("mjcf", "speed_limits"):
         if key not in t:
             raise _fail(source, f"[arm] {key}", "missing (required)")
-    flange = t["flange"]
-    if not isinstance(flange, str) or not flange:
+    flange = t.get("flange")
+    if flange is not None and (not isinstance(flange, str) or not flange):
         raise _fail(source, "[arm] flange", f"must be a body or site name, got {flange!r}")
     speed = _numbers(source, "[arm] speed_limits", t["speed_limits"], what="[rad/s]")
     if any(v <= 0 for v in speed):
@@ -343,6 +366,8 @@ def _parse_arm(source: Path, t: Mapping[str, Any]) -> ArmDescription:
         accel_limits=accel,
         home=home,
         angle=_angle(source, "[arm] angle", t.get("angle")),
+        base_pos=_vec3(source, "[arm] base_pos", t["base_pos"]) if "base_pos" in t else None,
+        base_quat=_unit_quat(source, "[arm] base_quat", t.get("base_quat", [1, 0, 0, 0])),
     )
 
 
@@ -396,14 +421,12 @@ def _parse_gripper(source: Path, t: Mapping[str, Any]) -> GripperDescription:
     commands: dict[str, tuple[float, ...] | None] = {}
     for key in ("open_command", "closed_command"):
         commands[key] = _numbers(source, f"[gripper] {key}", t[key]) if key in t else None
-    grip_force = None
-    if "grip_force" in t:
-        value = t["grip_force"]
-        if not _is_number(value) or not math.isfinite(value) or value <= 0:
-            raise _fail(
-                source, "[gripper] grip_force", f"must be a positive number [N], got {value!r}"
-            )
-        grip_force = float(value)
+    forces: dict[str, float | None] = {}
+    for key in ("grip_force", "squeeze_force"):
+        value = t.get(key)
+        if value is not None and (not _is_number(value) or not math.isfinite(value) or value <= 0):
+            raise _fail(source, f"[gripper] {key}", f"must be a positive number [N], got {value!r}")
+        forces[key] = None if value is None else float(value)
     couple = t.get("couple_fingers", True)
     if not isinstance(couple, bool):
         raise _fail(source, "[gripper] couple_fingers", f"must be true or false, got {couple!r}")
@@ -416,6 +439,7 @@ def _parse_gripper(source: Path, t: Mapping[str, Any]) -> GripperDescription:
         tcp=tcp,
         open_command=commands["open_command"],
         closed_command=commands["closed_command"],
-        grip_force=grip_force,
+        grip_force=forces["grip_force"],
+        squeeze_force=forces["squeeze_force"],
         couple_fingers=couple,
     )

@@ -10,7 +10,9 @@ the field and the element.
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -33,6 +35,7 @@ from pickplace.robot.physics import (
     classify_actuators,
     couple_fingers,
     motor_to_position,
+    name_unnamed_geoms,
     raise_armature,
     set_gravcomp,
     set_gripper_joint_minimums,
@@ -72,6 +75,11 @@ class PreparedArm:
         flange_pos: Flange position in that body's frame [m].
         flange_quat: Flange orientation (wxyz) in that body's frame.
         repairs: What was changed, one line each.
+        lowest_z: Lowest point [m] along the world's z, relative to the arm's root frame
+            turned by ``[arm] base_quat``, of the collision geoms that move with a joint but
+            whose height no joint changes (below the first joint that is not a vertical
+            hinge): what stands closest to the floor whatever the posture; inf if none.
+        lowest_geom: The geom with that point ("" if none).
     """
 
     spec: mujoco.MjSpec
@@ -81,25 +89,187 @@ class PreparedArm:
     flange_pos: np.ndarray
     flange_quat: np.ndarray
     repairs: tuple[str, ...]
+    lowest_z: float = np.inf
+    lowest_geom: str = ""
+
+
+DEFAULT_FLANGE_SITE = "attachment_site"
+"""The flange when the description names none: this site (MuJoCo Menagerie's convention for
+where a tool goes), else the last body of the arm's chain."""
+
+
+def _children(model: mujoco.MjModel) -> dict[int, list[int]]:
+    out: dict[int, list[int]] = {}
+    for b in range(1, model.nbody):
+        out.setdefault(int(model.body_parentid[b]), []).append(b)
+    return out
+
+
+def _chain_end(model: mujoco.MjModel) -> int:
+    """The arm's last body: from the file's root body down while a body has one child (a
+    branch, e.g. a hand's fingers, ends the chain at the body it branches from)."""
+    children = _children(model)
+    roots = children.get(0, [])
+    if len(roots) != 1:
+        return -1
+    b = roots[0]
+    while len(children.get(b, [])) == 1:
+        b = children[b][0]
+    return b
+
+
+def _leaf_bodies(model: mujoco.MjModel) -> list[str]:
+    """Bodies without children: the candidate flange bodies, in file order."""
+    children = _children(model)
+    return [
+        _name(model, mujoco.mjtObj.mjOBJ_BODY, b)
+        for b in range(1, model.nbody)
+        if b not in children
+    ]
 
 
 def _flange(
     model: mujoco.MjModel, arm: ArmDescription, part: Part, src: str
-) -> tuple[int, np.ndarray, np.ndarray]:
-    """Body of the flange and the flange's pose in it (a site's, or the body's own frame)."""
-    site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, arm.flange)
+) -> tuple[int, np.ndarray, np.ndarray, str]:
+    """Body of the flange, the flange's pose in it (a site's, or the body's own frame), and
+    what was chosen in words when the description names no flange (else "")."""
+    name = arm.flange
+    chosen = ""
+    if name is None:
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, DEFAULT_FLANGE_SITE) >= 0:
+            name = DEFAULT_FLANGE_SITE
+            chosen = f"site '{name}'"
+        else:
+            end = _chain_end(model)
+            if end <= 0:
+                raise RobotError(
+                    f"{src}: [arm] flange: missing, and '{part.path}' has no site "
+                    f"'{DEFAULT_FLANGE_SITE}' and no single chain of bodies; valid: "
+                    f"{_flange_choices(model)}"
+                )
+            name = _name(model, mujoco.mjtObj.mjOBJ_BODY, end)
+            chosen = f"body '{name}', the chain's last"
+    site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
     if site >= 0:
         body = int(model.site_bodyid[site])
-        return body, model.site_pos[site].copy(), model.site_quat[site].copy()
-    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, arm.flange)
+        return body, model.site_pos[site].copy(), model.site_quat[site].copy(), chosen
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
     if body > 0:
-        return body, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
-    bodies = [_name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, model.nbody)]
-    sites = [_name(model, mujoco.mjtObj.mjOBJ_SITE, s) for s in range(model.nsite)]
+        return body, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), chosen
     raise RobotError(
-        f"{src}: [arm] flange: '{arm.flange}' is no body or site of '{part.path}'; valid: "
-        f"bodies {', '.join(bodies) or '(none)'}; sites {', '.join(sites) or '(none)'}"
+        f"{src}: [arm] flange: '{name}' is no body or site of '{part.path}'; valid: "
+        f"{_flange_choices(model)}"
     )
+
+
+def _flange_choices(model: mujoco.MjModel) -> str:
+    """The flange candidates in words: every named site, and the last bodies of the chain."""
+    sites = [
+        n
+        for s in range(model.nsite)
+        if (n := mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SITE, s))
+    ]
+    return (
+        f"a site ({', '.join(sites) or 'none'}) or a body, e.g. the last of the chain "
+        f"({', '.join(_leaf_bodies(model)) or 'none'})"
+    )
+
+
+def _hand_below(
+    model: mujoco.MjModel,
+    flange_body: int,
+    chain: list[int],
+    joint_ids: list[int],
+    part: Part,
+    src: str,
+) -> None:
+    """Refuse an arm file that carries a hand: jointed bodies below the flange, off the chain.
+
+    The message names those bodies and, if the file's folder has one, the arm-only file: an
+    MJCF file there whose joints are exactly the chain's.
+    """
+    on_chain = set(chain)
+    below: list[int] = []
+    stack = list(_children(model).get(flange_body, []))
+    while stack:
+        b = stack.pop()
+        below.append(b)
+        stack.extend(_children(model).get(b, []))
+    hand = sorted(b for b in below if model.body_jntnum[b] > 0 and b not in on_chain)
+    if not hand:
+        return
+    bodies = ", ".join(_name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in hand)
+    joints = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joint_ids}
+    arm_only = _arm_only_files(part.path, joints)
+    hint = (
+        f"the arm-only file beside it ({', '.join(arm_only)}) as [arm] mjcf, and the "
+        f"hand's own file as [gripper] mjcf"
+        if arm_only
+        else "an arm file without the hand as [arm] mjcf, and the hand's own file as [gripper] mjcf"
+    )
+    flange = _name(model, mujoco.mjtObj.mjOBJ_BODY, flange_body)
+    raise RobotError(
+        f"{src}: [arm] mjcf: '{part.path.name}' already has a gripper below the flange "
+        f"'{flange}' (jointed bodies {bodies}); valid: {hint}"
+    )
+
+
+def _arm_only_files(path: Path, joints: set[str | None]) -> list[str]:
+    """MJCF files in ``path``'s folder whose named joints are exactly ``joints``."""
+    out = []
+    for other in sorted(path.parent.glob("*.xml")):
+        if other.resolve() == path.resolve():
+            continue
+        try:
+            root = ET.parse(other).getroot()
+        except (OSError, ET.ParseError):
+            continue
+        names = {j.get("name") for j in root.iter("joint") if j.get("name")}
+        if root.tag == "mujoco" and names == joints:
+            out.append(other.name)
+    return out
+
+
+_VERTICAL = 1.0 - 1e-9
+
+
+def _lowest_swivel_point(model: mujoco.MjModel, base_quat: np.ndarray) -> tuple[float, str]:
+    """See :attr:`PreparedArm.lowest_z`: (height [m], geom name) at the file's own posture."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    flat = np.zeros(9)
+    mujoco.mju_quat2Mat(flat, base_quat)
+    R0 = flat.reshape(3, 3)
+    level = np.zeros(model.nbody, dtype=bool)  # no joint above it changes its height
+    moves = np.zeros(model.nbody, dtype=bool)  # some joint above it moves it
+    level[0] = True
+    for b in range(1, model.nbody):  # parents come before their children
+        parent = int(model.body_parentid[b])
+        level[b], moves[b] = level[parent], moves[parent]
+        for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b]):
+            moves[b] = True
+            vertical = abs(float((R0 @ data.xaxis[j])[2])) >= _VERTICAL
+            if int(model.jnt_type[j]) != int(mujoco.mjtJoint.mjJNT_HINGE) or not vertical:
+                level[b] = False
+    lowest, name = np.inf, ""
+    for g in range(model.ngeom):
+        b = int(model.geom_bodyid[g])
+        if not (level[b] and moves[b]) or (
+            model.geom_contype[g] == 0 and model.geom_conaffinity[g] == 0
+        ):
+            continue
+        R = R0 @ data.geom_xmat[g].reshape(3, 3)
+        p = R0 @ data.geom_xpos[g]
+        mesh = int(model.geom_dataid[g])
+        if int(model.geom_type[g]) == int(mujoco.mjtGeom.mjGEOM_MESH) and mesh >= 0:
+            adr, num = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
+            z = float(np.min(model.mesh_vert[adr : adr + num] @ R[2]) + p[2])
+        else:
+            c, h = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
+            z = float(p[2] + R[2] @ c - np.abs(R[2]) @ h)
+        if z < lowest:
+            lowest, name = z, _name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+    return lowest, name
 
 
 def _chain_joints(model: mujoco.MjModel, flange_body: int, part: Part, src: str) -> list[int]:
@@ -151,9 +321,20 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
     """
     src = str(desc.source)
     spec = part.new_spec()
+    repairs: list[str] = []
+    if named := name_unnamed_geoms(spec):
+        repairs.append(f"{named} unnamed geoms named by body and index (body/geom[k])")
     model = _compile(spec, part)
-    flange_body, flange_pos, flange_quat = _flange(model, desc.arm, part, src)
+    flange_body, flange_pos, flange_quat, chosen = _flange(model, desc.arm, part, src)
+    if chosen:
+        repairs.append(f"no [arm] flange given: the {chosen}")
     joint_ids = _chain_joints(model, flange_body, part, src)
+    chain = []
+    b = flange_body
+    while b > 0:
+        chain.append(b)
+        b = int(model.body_parentid[b])
+    _hand_below(model, flange_body, chain, joint_ids, part, src)
     names = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joint_ids)
     check_speed_limits(desc.source, desc.arm.speed_limits, names)
     if desc.arm.accel_limits is not None:
@@ -168,7 +349,6 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
                     f"[{lo:g}, {hi:g}]"
                 )
 
-    repairs: list[str] = []
     kinds = classify_actuators(model)
     by_joint: dict[int, list[ActuatorKind]] = {}
     for a in kinds:
@@ -223,6 +403,7 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
         raise_armature(joint, arm_min_armature(kp, timestep))
         if joint.armature > before:
             repairs.append(f"arm joint '{name}' armature {before:g} → {joint.armature:g}")
+    lowest, lowest_geom = _lowest_swivel_point(model, np.array(desc.arm.base_quat))
     set_gravcomp(spec)
     set_robot_contacts(spec)
     return PreparedArm(
@@ -233,6 +414,8 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
         flange_pos=flange_pos,
         flange_quat=flange_quat,
         repairs=tuple(repairs),
+        lowest_z=lowest,
+        lowest_geom=lowest_geom,
     )
 
 
@@ -311,6 +494,9 @@ def prepare_gripper(part: Part, desc: RobotDescription) -> PreparedGripper:
     src = str(desc.source)
     grip: GripperDescription = desc.gripper
     spec = part.new_spec()
+    repairs: list[str] = []
+    if named := name_unnamed_geoms(spec):
+        repairs.append(f"{named} unnamed geoms named by body and index (body/geom[k])")
     roots = [b.name for b in spec.worldbody.bodies]
     if len(roots) != 1 or not roots[0]:
         raise RobotError(
@@ -329,7 +515,6 @@ def prepare_gripper(part: Part, desc: RobotDescription) -> PreparedGripper:
             f"{src}: [gripper] mjcf: '{part.path}' has no actuator; valid: a motor, position "
             f"or general (affine) actuator that opens and closes the fingers"
         )
-    repairs: list[str] = []
     kinds = classify_actuators(model)
     for a in kinds:
         actuator = spec.actuators[a.index]

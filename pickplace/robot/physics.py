@@ -219,6 +219,48 @@ class Coupling:
         return 0.5 * (self.signs[0] * float(commands[0]) + self.signs[1] * float(commands[1]))
 
 
+def name_unnamed_geoms(spec: mujoco.MjSpec) -> int:
+    """Name every unnamed geom of a part by its body and index: ``hand/geom[3]``.
+
+    The index counts the body's geoms in file order from 0, visual ones included, so the
+    name can be found by reading the file; an unnamed body is ``body[k]`` (k its index in
+    the file, the world 0). Names, not ids, are what calibration, messages, overrides
+    (``[gripper] pads``) and recordings use.
+
+    Returns:
+        How many geoms were named.
+    """
+    existing = {g.name for g in spec.geoms if g.name}
+    named = 0
+    for k, body in enumerate(spec.bodies):
+        label = body.name or f"body[{k}]"
+        for i, geom in enumerate(body.geoms):
+            if not geom.name:
+                geom.name = unique_name(existing, f"{label}/geom[{i}]")
+                existing.add(geom.name)
+                named += 1
+    return named
+
+
+def scale_squeeze(spec: mujoco.MjSpec, ratio: float) -> None:
+    """Scale a gripper's squeeze by ``ratio``, as ``--vary grip_force`` scales a scene's.
+
+    Every actuator's force range × ratio; when ratio > 1 its position gain and bias × ratio
+    too and its damping × √ratio (the same damping ratio), so that a gripper whose squeeze is
+    set by its gain (a position actuator closing on a box it cannot reach) squeezes harder.
+    """
+    gain = max(1.0, ratio)
+    for actuator in spec.actuators:
+        actuator.forcerange = [float(v) * ratio for v in actuator.forcerange]
+        gainprm = np.array(actuator.gainprm, dtype=float)
+        biasprm = np.array(actuator.biasprm, dtype=float)
+        gainprm[0] *= gain
+        biasprm[1] *= gain
+        biasprm[2] *= np.sqrt(gain)
+        actuator.gainprm = gainprm
+        actuator.biasprm = biasprm
+
+
 def unique_name(existing: set[str], name: str) -> str:
     """``name``, or ``name_2``, ``name_3`` … : the first not in ``existing``."""
     candidate, k = name, 1
