@@ -11,8 +11,10 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -32,7 +34,7 @@ BACKEND_FIELDS = {*SWEEP_WALL_TIME_FIELDS, "backend", "workers"}
 CLUSTER = """
 import logging, sys
 import ray
-ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False,
          logging_level=logging.ERROR, object_store_memory=128 * 1024 * 1024)
 print(ray.get_runtime_context().gcs_address, flush=True)
 sys.stdin.read()  # until the test closes it
@@ -67,10 +69,11 @@ def local_cluster() -> Iterator[str]:
             proc.wait()
 
 
-def cli(*args: str) -> subprocess.Popen[str]:
+def cli(*args: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    """``pickplace ARGS`` in a subprocess, ``env`` added to the environment."""
     # Ray's clusters use token authentication (the token in ~/.ray, shared on this machine);
     # a driver that joins one says so.
-    env = dict(os.environ, RAY_AUTH_MODE="token")
+    env = dict(os.environ, RAY_AUTH_MODE="token", **(env or {}))
     return subprocess.Popen(
         [sys.executable, "-m", "pickplace.cli", *args],
         stdout=subprocess.PIPE,
@@ -106,6 +109,28 @@ def test_ray_and_process_backends_give_identical_per_seed_outcomes_for_200_trial
     reasons = set(process["failures_by_reason"])
     assert {"dropped", "missed-grasp"} <= reasons, reasons
     assert 0 < process["successes"] < 200
+
+
+@pytest.mark.slow
+def test_without_an_address_a_sweep_starts_its_own_cluster_where_another_is_recorded() -> None:
+    """``ray start`` records its cluster in ``<temp dir>/ray/ray_current_cluster``, and
+    ``ray.init()`` without an address joins the cluster recorded there (and refuses the CPUs
+    given: exit 2). A sweep without ``--address`` starts its own all the same. (A temporary
+    Ray folder of the test's: the machine's ``/tmp/ray`` is everyone's.)"""
+    with (
+        local_cluster() as address,
+        tempfile.TemporaryDirectory(prefix="pp-ray-", dir="/tmp") as tmp,  # short socket paths
+    ):
+        (Path(tmp) / "ray").mkdir()
+        (Path(tmp) / "ray" / "ray_current_cluster").write_text(address)
+        proc = cli(
+            "sweep", "--backend", "ray", "--workers", "1", "--trials", "1", "--json",
+            env={"RAY_TMPDIR": tmp},
+        )  # fmt: skip
+        out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    report = json.loads(out)
+    assert report["backend"] == "ray" and report["workers"] == 1 and report["successes"] == 1
 
 
 @pytest.mark.slow
