@@ -1,6 +1,7 @@
 """The Ray backend gives the process backend's per-seed outcomes, on a cluster this test starts.
 
 CI installs the ``ray`` extra (the README's test command); without Ray these tests are skipped.
+Both start Ray clusters: the full tier (``slow``).
 """
 
 from __future__ import annotations
@@ -133,17 +134,47 @@ def test_without_an_address_a_sweep_starts_its_own_cluster_where_another_is_reco
     assert report["backend"] == "ray" and report["workers"] == 1 and report["successes"] == 1
 
 
+def descendants(pid: int) -> list[int]:
+    """Every process started by ``pid``, its children's children and so on."""
+    found: list[int] = []
+    todo = [pid]
+    while todo:
+        for task in Path(f"/proc/{todo.pop()}/task").glob("*"):
+            with contextlib.suppress(OSError):
+                children = [int(c) for c in (task / "children").read_text().split()]
+                found += children
+                todo += children
+    return found
+
+
+def runs_a_trial(pid: int) -> bool:
+    """True once a Ray worker of the cluster that ``pid`` started runs a trial (Ray names a
+    worker's process after its task)."""
+    for child in descendants(pid):
+        with contextlib.suppress(OSError):
+            if Path(f"/proc/{child}/cmdline").read_bytes().startswith(b"ray::guarded_trial"):
+                return True
+    return False
+
+
 @pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
 def test_a_ray_sweep_on_its_own_cluster_stops_on_sigterm_with_a_partial_report() -> None:
+    """Signalled once trials run: the sweep's own handler has SIGTERM again. (Until ray.init
+    returns, Ray's handlers have it, and starting the cluster takes 5 to 25 s on a loaded
+    2-core machine: a fixed wait of 15 s sometimes signalled Ray instead.)"""
     proc = cli("sweep", "--backend", "ray", "--workers", "2", "--trials", "400", "--json")
-    time.sleep(15.0)  # the cluster is up, trials are running
+    deadline = time.monotonic() + 300
+    while not runs_a_trial(proc.pid):  # the cluster is up, trials are running
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
     assert proc.poll() is None
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
     took = time.monotonic() - t0
     assert proc.returncode == 128 + signal.SIGTERM
-    assert took < 10.0, took  # cancel the tasks, stop the cluster
+    assert took < 10.0, took  # cancel the tasks, stop the cluster (README: about 2 s)
     assert err.strip() == "pickplace: stopped by SIGTERM"
     report = json.loads(out)
     assert report["interrupted"] is True
