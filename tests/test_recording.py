@@ -103,6 +103,7 @@ def test_application_and_recording_id(recording: Recording) -> None:
     assert stores[0].recording_id == RECORDING_ID
 
 
+@pytest.mark.slow
 def test_a_run_s_recording_id_names_its_robot(tmp_path: Path) -> None:
     """Two runs that differ only in the robot must not merge in one viewer."""
     from pickplace.run.runner import RunRequest, run
