@@ -1,18 +1,33 @@
-"""Shared fixtures: the default scene (the iiwa14-wsg50 in scenes/world.xml), and helpers to
-run scenarios and the CLI."""
+"""Shared fixtures: the default scene (the iiwa14-wsg50 in scenes/world.xml), one finished run
+per (scenario, controller, seed, robot) and process, and helpers to run the CLI in this process
+or in a subprocess.
+
+Two tiers (``pyproject.toml``): ``pytest`` runs the tests not marked ``slow`` (unit and math
+tests, bad input, one run, one recording, one small sweep, one CLI subprocess); ``pytest -m
+slow`` runs the rest (every scenario and seed, golden files, signals, viewers, Ray, robots).
+"""
 
 from __future__ import annotations
 
+import copy
+import functools
 import json
 import os
 import subprocess
 import sys
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from pickplace.robot.registry import DEFAULT_ROBOT
+from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.loader import load_scene
+from pickplace.sim.loop import Simulation
+from pickplace.sim.verdict import WALL_TIME_FIELDS, RunResult
 from pickplace.world.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent
@@ -29,6 +44,52 @@ def _own_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
 def scene() -> Scene:
     """The default scene (do not mutate its model: faults need a fresh one)."""
     return load_scene()
+
+
+# ---------------------------------------------------------------------- shared runs
+
+
+@dataclass(frozen=True)
+class Finished:
+    """A finished run: the simulation (its model, data and tick log at the end) and result.
+
+    Shared by every test of this process that asks for the same inputs: read it, never step
+    it or change its model or data.
+    """
+
+    sim: Simulation
+    result: RunResult
+
+    def summary(self) -> dict[str, Any]:
+        """The run's summary (a copy of its own: a test may change it)."""
+        return copy.deepcopy(self.result.summary())
+
+
+def finished(
+    scenario: str = "pick-place", controller: str = "qp", seed: int = 0, robot: str = DEFAULT_ROBOT
+) -> Finished:
+    """The run of these inputs, simulated once per test process (``prepare`` and ``run``, as
+    ``pickplace run`` does without outputs), however many tests judge it.
+
+    A test about running the same inputs again (determinism) makes its own second run.
+    """
+    return _finished(scenario, controller, seed, robot)
+
+
+@functools.cache
+def _finished(scenario: str, controller: str, seed: int, robot: str) -> Finished:
+    _, _, sim = prepare(
+        RunRequest(scenario=scenario, controller=controller, seed=seed, robot=robot)
+    )
+    return Finished(sim, sim.run())
+
+
+def without_wall_time(summary: dict[str, Any]) -> dict[str, Any]:
+    """``summary`` without the fields that measure the wall clock (they differ between runs)."""
+    return {k: v for k, v in summary.items() if k not in WALL_TIME_FIELDS}
+
+
+# ---------------------------------------------------------------------- the CLI
 
 
 def run_cli(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
@@ -48,8 +109,72 @@ def run_cli(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[s
 def run_cli_json(*args: str) -> tuple[int, dict[str, Any]]:
     """Run ``pickplace run ARGS --json`` and parse its one JSON object."""
     proc = run_cli("run", *args, "--json")
-    lines = [line for line in proc.stdout.splitlines() if line.strip()]
-    assert len(lines) == 1, (
-        f"expected one JSON line, got stdout={proc.stdout!r} stderr={proc.stderr!r}"
-    )
-    return proc.returncode, json.loads(lines[0])
+    return proc.returncode, one_json(proc.stdout, proc.stderr)
+
+
+def one_json(stdout: str, stderr: str = "") -> dict[str, Any]:
+    """The one JSON object that ``stdout`` holds (the test fails otherwise)."""
+    lines = [line for line in stdout.splitlines() if line.strip()]
+    assert len(lines) == 1, f"expected one JSON line, got stdout={stdout!r} stderr={stderr!r}"
+    result: dict[str, Any] = json.loads(lines[0])
+    return result
+
+
+@dataclass(frozen=True)
+class CliRun:
+    """What ``pickplace ARGS`` did: exit code, stdout and stderr."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+# Python's own warning filters (what a ``pickplace`` process starts with, unlike pytest's),
+# most general first.
+_PYTHON_WARNING_FILTERS = (
+    ("ignore", ResourceWarning),
+    ("ignore", ImportWarning),
+    ("ignore", PendingDeprecationWarning),
+    ("ignore", DeprecationWarning),
+)
+
+
+@pytest.fixture
+def cli(capfd: pytest.CaptureFixture[str]) -> Callable[..., CliRun]:
+    """``pickplace ARGS`` in this process: ``pickplace.cli.main(ARGS)`` in the folder ``cwd``
+    (default: the repository, as :func:`run_cli`), with file descriptors 1 and 2 captured (so
+    what a library writes there counts too) and Python's warnings printed on stderr as a
+    ``pickplace`` process would print them.
+
+    Much cheaper than a subprocess (no interpreter start, imports or robot calibration), so
+    bad-input tests use it; what only a process shows (signals, closed streams, exit status
+    of the interpreter) is tested with :func:`run_cli` or ``tests/test_robustness.py``.
+    """
+    from pickplace.cli import main
+
+    def call(*args: str, cwd: Path = REPO) -> CliRun:
+        capfd.readouterr()  # whatever this test printed before
+        here = os.getcwd()
+        rust_log = os.environ.get("RUST_LOG")  # main() sets it for its process
+        os.chdir(cwd)
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.resetwarnings()
+                for action, category in _PYTHON_WARNING_FILTERS:
+                    warnings.simplefilter(action, category)
+                try:
+                    code = main(list(args))
+                except SystemExit as exc:  # as `sys.exit(main())` would end the process
+                    code = exc.code if isinstance(exc.code, int) else 1
+        finally:
+            os.chdir(here)
+            if rust_log is None:
+                os.environ.pop("RUST_LOG", None)
+            else:
+                os.environ["RUST_LOG"] = rust_log
+        out, err = capfd.readouterr()
+        for w in caught:
+            err += warnings.formatwarning(w.message, w.category, w.filename, w.lineno, w.line)
+        return CliRun(code, out, err)
+
+    return call

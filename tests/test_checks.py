@@ -157,7 +157,7 @@ def test_failure_reasons_are_the_documented_strings() -> None:
 
 
 # ---------------------------------------------------------------------------- failure texts
-# Every failure text states the measured value, the limit and what it refers to (issue 25).
+# Every failure text states the measured value, the limit and what it refers to.
 
 
 def test_missed_grasp_text_gives_forces_with_the_digits_their_limit_needs() -> None:

@@ -1,15 +1,24 @@
-"""The real CLI in a subprocess: bad input, faults, interruption, output formats."""
+"""The CLI: bad input, faults, output formats.
+
+Bad input runs ``main()`` in this process (the ``cli`` fixture: exit code, stdout and stderr as
+a process would give them); one run goes through a real ``pickplace`` subprocess. The faults'
+outcomes are judged on the runs the tests share (``tests.conftest.finished``: the CLI's JSON is
+that run's summary), and one failed run is checked for its exit code.
+"""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from pickplace.sim.scenarios import SCENARIOS
-from tests.conftest import REPO, run_cli, run_cli_json
+from tests.conftest import REPO, CliRun, finished, one_json, run_cli_json, without_wall_time
 from tests.toy_robot import BAD_CASES, write_toy_robot
+
+Cli = Callable[..., CliRun]
 
 BAD_INPUTS = [
     (["--scene", "/nonexistent/scene.xml"], "does not exist"),
@@ -39,8 +48,10 @@ BAD_INPUTS = [
 @pytest.mark.parametrize(
     ("args", "expected"), BAD_INPUTS, ids=lambda v: " ".join(v) if isinstance(v, list) else ""
 )
-def test_bad_input_is_one_line_exit_2_without_traceback(args: list[str], expected: str) -> None:
-    proc = run_cli("run", *args)
+def test_bad_input_is_one_line_exit_2_without_traceback(
+    cli: Cli, args: list[str], expected: str
+) -> None:
+    proc = cli("run", *args)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
@@ -49,10 +60,10 @@ def test_bad_input_is_one_line_exit_2_without_traceback(args: list[str], expecte
     assert proc.stdout == ""
 
 
-def test_world_missing_a_required_name_lists_the_names_that_exist(tmp_path: Path) -> None:
+def test_world_missing_a_required_name_lists_the_names_that_exist(cli: Cli, tmp_path: Path) -> None:
     world = (REPO / "scenes" / "world.xml").read_text()
     (tmp_path / "world.xml").write_text(world.replace('name="bin2_floor"', 'name="bin2_base"'))
-    proc = run_cli("run", "--scene", str(tmp_path / "world.xml"))
+    proc = cli("run", "--scene", str(tmp_path / "world.xml"))
     assert proc.returncode == 2
     line = proc.stderr.strip()
     assert len(line.splitlines()) == 1 and "Traceback" not in proc.stderr
@@ -60,24 +71,24 @@ def test_world_missing_a_required_name_lists_the_names_that_exist(tmp_path: Path
     assert "bin2_base" in line and "bin1_floor" in line
 
 
-def test_unreachable_brick_is_refused(tmp_path: Path) -> None:
+def test_unreachable_brick_is_refused(cli: Cli, tmp_path: Path) -> None:
     """A world whose bin 1 lies 2 m away: the brick is inside the bin but out of reach."""
     world = (REPO / "scenes" / "world.xml").read_text()
     (tmp_path / "world.xml").write_text(
         world.replace('<body name="bin1" pos="0 -0.55 0">', '<body name="bin1" pos="0 -2 0">')
     )
-    proc = run_cli("run", "--scene", str(tmp_path / "world.xml"), "--brick=0,-2,0")
+    proc = cli("run", "--scene", str(tmp_path / "world.xml"), "--brick=0,-2,0")
     assert proc.returncode == 2
     assert "unreachable" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
 
 
-@pytest.mark.parametrize(
-    ("scenario", "reason"),
-    [(s.name, s.expected) for s in SCENARIOS.values() if s.expected != "success"],
-)
-def test_faults_end_in_exit_1_with_the_right_reason(scenario: str, reason: str) -> None:
-    code, s = run_cli_json("--scenario", scenario)
-    assert code == 1
+FAULTS = [(s.name, s.expected) for s in SCENARIOS.values() if s.expected != "success"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("scenario", "reason"), FAULTS)
+def test_faults_end_with_the_right_reason_at_their_failure_tick(scenario: str, reason: str) -> None:
+    s = finished(scenario).summary()
     assert s["success"] is False
     assert s["failure"] == reason
     assert s["failure_tick"] is not None
@@ -85,15 +96,29 @@ def test_faults_end_in_exit_1_with_the_right_reason(scenario: str, reason: str) 
     assert failure and failure[0]["tick"] == s["failure_tick"]
 
 
+@pytest.mark.slow
+def test_a_failed_run_is_exit_1_and_its_json_says_why(cli: Cli) -> None:
+    proc = cli("run", "--scenario", "fault-gripper-disabled", "--json")
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr == ""
+    s = one_json(proc.stdout)
+    assert s["success"] is False and s["failure"] == "missed-grasp"
+    # The JSON is the run's summary: the faults above are judged on the shared runs.
+    shared = finished("fault-gripper-disabled").summary()
+    assert without_wall_time(s) == json.loads(json.dumps(without_wall_time(shared)))
+
+
+@pytest.mark.slow
 def test_knock_is_reported_at_the_tick_it_happened() -> None:
-    _, s = run_cli_json("--scenario", "fault-knock")
+    s = finished("fault-knock").summary()
     fault = next(e for e in s["events"] if e["kind"] == "fault")
     drop = next(e for e in s["events"] if e["kind"] == "drop")
     assert 0 <= drop["tick"] - fault["tick"] <= 5  # within 50 ms of the blow
 
 
+@pytest.mark.slow
 def test_unreachable_target_keeps_joints_within_limits_and_finite() -> None:
-    _, s = run_cli_json("--scenario", "fault-unreachable")
+    s = finished("fault-unreachable").summary()
     assert s["failure"] == "ik-failed"
     assert s["max_joint_limit_violation_rad"] <= 1e-3
     assert s["max_joint_speed_ratio"] <= 1 + 1e-6
@@ -101,6 +126,7 @@ def test_unreachable_target_keeps_joints_within_limits_and_finite() -> None:
 
 
 def test_json_output_has_every_documented_key() -> None:
+    """The real command in a subprocess, as a user runs it (the default tier's only one)."""
     code, s = run_cli_json()
     assert code == 0
     keys = {
@@ -131,17 +157,22 @@ def test_json_output_has_every_documented_key() -> None:
     assert s["success"] is True and s["failure"] is None
 
 
-def test_human_summary_and_scenarios_listing() -> None:
-    proc = run_cli("run")
+@pytest.mark.slow
+def test_human_summary(cli: Cli) -> None:
+    proc = cli("run")
     assert proc.returncode == 0
     assert "pick-place / iiwa14-wsg50 / qp / seed 0: SUCCESS" in proc.stdout
-    listing = run_cli("scenarios")
+
+
+def test_scenarios_listing(cli: Cli) -> None:
+    listing = cli("scenarios")
+    assert listing.returncode == 0
     names = [line.split()[0] for line in listing.stdout.splitlines()]
     assert {"pick-place", "pick-place-random", "singular-reach"} <= set(names)
-    assert json.loads(run_cli("scenarios", "--json").stdout)["pick-place"]["expected"] == "success"
+    assert json.loads(cli("scenarios", "--json").stdout)["pick-place"]["expected"] == "success"
 
 
-# The brief's bad robot files, through the real CLI (tests/toy_robot.py writes each one).
+# The brief's bad robot files, through the CLI (tests/toy_robot.py writes each one).
 CLI_BAD_ROBOTS = [
     "missing arm file",
     "mesh does not load",
@@ -155,11 +186,11 @@ CLI_BAD_ROBOTS = [
 
 @pytest.mark.parametrize("case", CLI_BAD_ROBOTS)
 def test_a_bad_robot_file_is_one_line_naming_file_and_field_exit_2(
-    case: str, tmp_path: Path
+    cli: Cli, case: str, tmp_path: Path
 ) -> None:
     changes, field, fragments = BAD_CASES[case]
     path = write_toy_robot(tmp_path, **changes)
-    proc = run_cli("run", "--robot", str(path))
+    proc = cli("run", "--robot", str(path))
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
@@ -172,21 +203,21 @@ def test_a_bad_robot_file_is_one_line_naming_file_and_field_exit_2(
 
 
 @pytest.mark.parametrize("command", ["run", "plan", "sweep"])
-def test_an_unknown_robot_lists_the_bundled_ones(command: str, tmp_path: Path) -> None:
-    proc = run_cli(command, "--robot", "no-such-robot")
+def test_an_unknown_robot_lists_the_bundled_ones(cli: Cli, command: str, tmp_path: Path) -> None:
+    proc = cli(command, "--robot", "no-such-robot")
     assert proc.returncode == 2
     assert proc.stderr.strip() == (
         "pickplace: error: --robot: unknown robot 'no-such-robot'; valid: iiwa14-wsg50, "
         "panda-hand, ur5e-2f85, a robot.toml path or a folder holding one"
     )
     missing = tmp_path / "robot.toml"
-    proc = run_cli(command, "--robot", str(missing))
+    proc = cli(command, "--robot", str(missing))
     assert proc.returncode == 2
     assert f"{missing}: robot description does not exist" in proc.stderr
 
 
-def test_robots_are_listed_with_joints_gripper_width_force_and_file() -> None:
-    proc = run_cli("robots", "--json")
+def test_robots_are_listed_with_joints_gripper_width_force_and_file(cli: Cli) -> None:
+    proc = cli("robots", "--json")
     assert proc.returncode == 0, proc.stderr
     rows = {r["name"]: r for r in json.loads(proc.stdout)["robots"]}
     assert set(rows) == {"iiwa14-wsg50", "panda-hand", "ur5e-2f85"}
@@ -203,16 +234,18 @@ def test_robots_are_listed_with_joints_gripper_width_force_and_file() -> None:
         assert Path(r["description"]).is_absolute() and Path(r["description"]).is_file()
         assert r["open_width_m"] > 0.05  # wider than the brick
         assert r["squeeze_force_n"] > 10.0
-    text = run_cli("robots")
+    text = cli("robots")
     assert text.returncode == 0 and len(text.stdout.strip().splitlines()) == 3
 
 
-def test_run_plan_and_sweep_take_a_robot() -> None:
-    code, s = run_cli_json("--robot", "ur5e-2f85")
-    assert code == 0 and s["robot"] == "ur5e-2f85" and s["success"]
-    plan = run_cli("plan", "--robot", "panda-hand", "--json")
+@pytest.mark.slow
+def test_run_plan_and_sweep_take_a_robot(cli: Cli) -> None:
+    proc = cli("run", "--robot", "ur5e-2f85", "--json")
+    s = one_json(proc.stdout)
+    assert proc.returncode == 0 and s["robot"] == "ur5e-2f85" and s["success"]
+    plan = cli("plan", "--robot", "panda-hand", "--json")
     assert plan.returncode == 0 and json.loads(plan.stdout)["robot"] == "panda-hand"
-    sweep = run_cli("sweep", "--robot", "panda-hand", "--trials", "2", "--workers", "1", "--json")
+    sweep = cli("sweep", "--robot", "panda-hand", "--trials", "2", "--workers", "1", "--json")
     assert sweep.returncode == 0, sweep.stderr
     report = json.loads(sweep.stdout)
     assert report["robot"] == "panda-hand" and report["successes"] == 2

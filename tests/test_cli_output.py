@@ -1,4 +1,4 @@
-"""What the terminal says explains itself (issue 25): help without markup and with defaults, a
+"""What the terminal says explains itself: help without markup and with defaults, a
 refused run's refusal instead of metrics, the drawn parameters with units, absolute robot
 paths, a robot folder, the sweep's recording line and a comparison counted in seeds."""
 

@@ -5,6 +5,7 @@ inside functions, and ``if TYPE_CHECKING`` blocks alike)."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -45,8 +46,10 @@ def unit_of(module: str) -> str:
     return module.split(".")[1] if module.count(".") else ""
 
 
+@functools.cache
 def import_graph() -> dict[str, set[str]]:
-    """Module → the pickplace modules it imports, everywhere in its file."""
+    """Module → the pickplace modules it imports, everywhere in its file (parsed once per
+    process: do not change it)."""
     graph: dict[str, set[str]] = {}
     for path in sorted(PACKAGE.rglob("*.py")):
         name = module_name(path)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from typing import Any
 
 import mujoco
@@ -26,7 +27,7 @@ from pickplace.sim.checks import FailureReason
 from pickplace.sim.task import World
 from pickplace.world.placements import BrickPlacement, brick_on_floor, target_placement
 from pickplace.world.scene import Scene
-from tests.conftest import run_cli
+from tests.conftest import CliRun, finished
 
 # A corner of bin 1 where no grasp fits: the brick against two walls, the WSG's 146 mm palm
 # over one of them whichever way it closes.
@@ -211,13 +212,13 @@ def test_no_feasible_plan_ends_the_run_before_any_physics(scene: Scene) -> None:
     assert report.refusal() in failure["text"] and "palm" in failure["text"]
 
 
-def test_corner_brick_is_refused_by_run_and_reported_by_plan() -> None:
-    proc = run_cli("run", CORNER)
+def test_corner_brick_is_refused_by_run_and_reported_by_plan(cli: Callable[..., CliRun]) -> None:
+    proc = cli("run", CORNER)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr
     assert "no feasible plan" in lines[0] and "move it inwards or turn it" in lines[0]
-    proc = run_cli("plan", CORNER, "--json")
+    proc = cli("plan", CORNER, "--json")
     assert proc.returncode == 1
     report = json.loads(proc.stdout)
     assert report["feasible"] is False and report["chosen"] is None
@@ -228,8 +229,8 @@ def test_corner_brick_is_refused_by_run_and_reported_by_plan() -> None:
         assert len(c["problem"]["point"]) == 3
 
 
-def test_plan_json_and_run_json_carry_the_same_plan() -> None:
-    proc = run_cli("plan", "--json")
+def test_plan_json_and_run_json_carry_the_same_plan(cli: Callable[..., CliRun]) -> None:
+    proc = cli("plan", "--json")
     assert proc.returncode == 0, proc.stderr
     planned = json.loads(proc.stdout)
     assert planned["feasible"] and planned["chosen"] == "across the width"
@@ -242,8 +243,9 @@ def test_plan_json_and_run_json_carry_the_same_plan() -> None:
     assert planned["planning_time_s"] > 0
     names = [k["name"] for k in planned["keyframes"]]
     assert names[0] == "initial" and names[-1] == "retreat"
-    proc = run_cli("run", "--json")
-    ran = json.loads(proc.stdout)
+    # What `pickplace run --json` prints is the run's summary (tests/test_cli.py): the shared
+    # nominal run's.
+    ran = json.loads(json.dumps(finished().summary()))
     keys = set(planned) - {"scenario", "robot", "controller", "seed", "planning_time_s"}
     assert planned["robot"] == ran["robot"] == "iiwa14-wsg50"
     assert {k: ran["plan"][k] for k in keys} == {k: planned[k] for k in keys}

@@ -103,6 +103,7 @@ def test_application_and_recording_id(recording: Recording) -> None:
     assert stores[0].recording_id == RECORDING_ID
 
 
+@pytest.mark.slow
 def test_a_run_s_recording_id_names_its_robot(tmp_path: Path) -> None:
     """Two runs that differ only in the robot must not merge in one viewer."""
     from pickplace.run.runner import RunRequest, run
@@ -378,7 +379,7 @@ def test_the_file_appears_only_when_the_run_ends(tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------------------- how it opens
-# A run's recording opens on the answer (issue 25): the verdict in view, the time cursor at the
+# A run's recording opens on the answer: the verdict in view, the time cursor at the
 # failure tick or the end, plot axes fitted to the data, keyframe labels apart.
 
 

@@ -57,6 +57,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
     return Recorded(path, sim, read_columns(path))
 
 
+@pytest.mark.slow
 def test_entities_and_their_contents_are_unchanged(recorded: Recorded) -> None:
     diff = first_difference(describe_recording(recorded.path), GOLDEN["entities"], "entities")
     assert diff is None, diff
@@ -163,11 +164,13 @@ LIMIT_LINES: dict[str, Callable[[Scene], list[float]]] = {
 }
 
 
+@pytest.mark.slow
 def test_every_plot_entity_is_known_here(recorded: Recorded) -> None:
     plots = {p for p in recorded.columns if p.startswith("plots/")}
     assert plots == set(PLOTS) | set(LIMIT_LINES)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(PLOTS))
 def test_plot_rows_are_the_tick_log_values(recorded: Recorded, path: str) -> None:
     sim, n = recorded.sim, recorded.ticks
@@ -180,6 +183,7 @@ def test_plot_rows_are_the_tick_log_values(recorded: Recorded, path: str) -> Non
     np.testing.assert_array_equal(np.array(rows["Scalars:scalars"]), expected)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(LIMIT_LINES))
 def test_limit_lines_have_a_row_at_the_first_and_the_last_tick(
     recorded: Recorded, path: str
@@ -194,6 +198,7 @@ def _xyzw(wxyz: np.ndarray) -> np.ndarray:
     return wxyz[..., [1, 2, 3, 0]]
 
 
+@pytest.mark.slow
 def test_tool_frames_bodies_and_ellipsoid_are_the_tick_log_poses(recorded: Recorded) -> None:
     log, n, cols = recorded.sim.log, recorded.ticks, recorded.columns
 

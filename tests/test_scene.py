@@ -229,6 +229,7 @@ def test_an_edited_world_is_composed_again(tmp_path: Path) -> None:
     assert load_scene(world).source_bin.center_W[1] == pytest.approx(-0.5)
 
 
+@pytest.mark.slow
 def test_a_sweep_composes_its_robot_once_per_process(monkeypatch: pytest.MonkeyPatch) -> None:
     """Trials copy the cached scene's model; composing and calibrating happens once."""
     loader.clear_scene_cache()

@@ -15,6 +15,7 @@ from pickplace.sim.loader import load_scene
 from pickplace.sim.loop import Simulation
 from pickplace.sim.scenarios import BuildRequest, get_scenario
 from pickplace.sim.verdict import WALL_TIME_FIELDS
+from tests.conftest import finished, without_wall_time
 
 
 def _summary(sim: Simulation) -> dict[str, Any]:
@@ -24,6 +25,7 @@ def _summary(sim: Simulation) -> dict[str, Any]:
     return summary
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("scenario", "controller"),
     [
@@ -34,12 +36,14 @@ def _summary(sim: Simulation) -> dict[str, Any]:
     ],
 )
 def test_assessing_in_blocks_equals_assessing_every_tick(scenario: str, controller: str) -> None:
-    """Same verdict, failure tick, events and metrics with blocks of 1 tick and the default."""
-    _, _, blocked = prepare(RunRequest(scenario=scenario, controller=controller))
+    """Same verdict, failure tick, events and metrics with blocks of 1 tick and the default
+    (the shared run)."""
+    shared = finished(scenario, controller)
+    blocked = shared.sim
     _, _, per_tick = prepare(RunRequest(scenario=scenario, controller=controller))
     per_tick.block_ticks = 1
     assert blocked.block_ticks > 1
-    a, b = _summary(blocked), _summary(per_tick)
+    a, b = without_wall_time(shared.summary()), _summary(per_tick)
     assert a == b
     n = blocked.ticks
     for name in ("sigma", "manipulability_t", "orientation_error", "slip", "holding_torque"):

@@ -1,11 +1,14 @@
-"""Sweeps: parallel trials give the same report as serial ones; failures name their seeds."""
+"""Sweeps: parallel trials give the same report as serial ones; failures name their seeds.
+
+The command line runs in this process (the ``cli`` fixture), its sweeps included.
+"""
 
 from __future__ import annotations
 
 import json
 import shlex
-import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -23,7 +26,7 @@ from pickplace.sweep.sweep import (
     run_sweep,
 )
 from pickplace.sweep.trial import TRIAL_KEYS
-from tests.conftest import REPO, run_cli, run_cli_json
+from tests.conftest import CliRun, one_json
 from tests.test_recording import read_entities
 
 
@@ -41,10 +44,12 @@ def test_parallel_sweep_equals_serial_sweep() -> None:
     assert serial["place_error_p95_m"] < 0.01
 
 
-def test_failed_seeds_are_reported_for_rerun() -> None:
-    proc = run_cli(
-        "sweep", "--scenario", "fault-brick-moved", "--trials", "2", "--seed", "5", "--json"
-    )
+Cli = Callable[..., CliRun]
+
+
+@pytest.mark.slow
+def test_failed_seeds_are_reported_for_rerun(cli: Cli) -> None:
+    proc = cli("sweep", "--scenario", "fault-brick-moved", "--trials", "2", "--seed", "5", "--json")
     assert proc.returncode == 1
     report = json.loads(proc.stdout)
     assert report["failures_by_reason"] == {"missed-grasp": 2}
@@ -64,8 +69,8 @@ def test_bad_sweep_requests_are_refused(kwargs: dict, message: str) -> None:
         SweepRequest(**kwargs).validate()
 
 
-def test_sweep_cli_bad_input_is_one_line() -> None:
-    proc = run_cli("sweep", "--workers", "0")
+def test_sweep_cli_bad_input_is_one_line(cli: Cli) -> None:
+    proc = cli("sweep", "--workers", "0")
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1
 
@@ -82,6 +87,7 @@ def varied() -> dict:
     return run_sweep(SweepRequest("pick-place-random", "qp", 8, 20, 2, vary=plan))
 
 
+@pytest.mark.slow
 def test_each_trial_records_its_draw_and_the_bins_add_up(varied: dict) -> None:
     plan = parse_vary(MASS_FRICTION)
     trials = varied["trial_results"]
@@ -95,6 +101,7 @@ def test_each_trial_records_its_draw_and_the_bins_add_up(varied: dict) -> None:
     assert [b["low"] for b in varied["by_parameter"]["friction"]] == [0.2, 1.0]
 
 
+@pytest.mark.slow
 def test_no_brick_is_refused_for_its_mass_the_physics_judges_it(varied: dict) -> None:
     # μ · 2 pads · 40 N holds m · g at rest up to m = 1.63 kg with μ = 0.2: heavier ones are
     # planned (with a warning), carried, and dropped, never refused.
@@ -106,12 +113,14 @@ def test_no_brick_is_refused_for_its_mass_the_physics_judges_it(varied: dict) ->
     assert "dropped" in varied["failures"]
 
 
-def test_a_failed_trial_re_runs_alone_from_the_printed_command(varied: dict) -> None:
+@pytest.mark.slow
+def test_a_failed_trial_re_runs_alone_from_the_printed_command(varied: dict, cli: Cli) -> None:
     reason, failure = next(iter(varied["failures"].items()))
     command = shlex.split(failure["rerun"])
     assert command[:2] == ["pickplace", "run"]
-    code, summary = run_cli_json(*command[2:])
-    assert code == 1
+    proc = cli(*command[1:], "--json")
+    assert proc.returncode == 1
+    summary = one_json(proc.stdout, proc.stderr)
     trial = next(t for t in varied["trial_results"] if t["seed"] == failure["example_seed"])
     assert {k: summary[k] for k in TRIAL_KEYS} == {k: trial[k] for k in TRIAL_KEYS}
     failure_event = next(e["text"] for e in summary["events"] if e["kind"] == "failure")
@@ -119,6 +128,7 @@ def test_a_failed_trial_re_runs_alone_from_the_printed_command(varied: dict) -> 
     assert summary["failure"] == reason
 
 
+@pytest.mark.slow
 def test_the_text_report_states_rate_interval_failures_metrics_and_bins(varied: dict) -> None:
     text = report_text(varied)
     assert text.startswith("pick-place-random / iiwa14-wsg50 / qp: ")  # as a run names itself
@@ -134,6 +144,7 @@ def test_the_text_report_states_rate_interval_failures_metrics_and_bins(varied: 
 # ---------------------------------------------------------------------- paired comparison
 
 
+@pytest.mark.slow
 def test_compare_runs_every_seed_per_arm_with_the_same_parameters() -> None:
     # pick-place (not -random, whose pose draws are repeated until the run's own controller's
     # pre-flight passes, so arms may get different poses for one seed).
@@ -188,22 +199,18 @@ def test_compare_runs_every_seed_per_arm_with_the_same_parameters() -> None:
         (["--backend", "ray", "--address", "localhost"], "not a Ray cluster address"),
     ],
 )
-def test_bad_sweep_options_are_exit_2_in_one_line(args: list[str], message: str) -> None:
-    proc = run_cli("sweep", "--trials", "1", *args)
+def test_bad_sweep_options_are_exit_2_in_one_line(cli: Cli, args: list[str], message: str) -> None:
+    proc = cli("sweep", "--trials", "1", *args)
     assert proc.returncode == 2, proc.stderr
     (line,) = proc.stderr.strip().splitlines()
     assert message in line
 
 
-def test_without_ray_the_ray_backend_is_exit_2_with_the_install_command() -> None:
-    code = (
-        "import sys; sys.modules['ray'] = None\n"  # import ray fails, as when it is missing
-        "from pickplace.cli import main\n"
-        "sys.exit(main(['sweep', '--trials', '1', '--backend', 'ray']))\n"
-    )
-    proc = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60
-    )
+def test_without_ray_the_ray_backend_is_exit_2_with_the_install_command(
+    cli: Cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray fails, as when it is missing
+    proc = cli("sweep", "--trials", "1", "--backend", "ray")
     assert proc.returncode == 2
     (line,) = proc.stderr.strip().splitlines()
     assert "pip install 'pickplace[ray]'" in line
@@ -212,9 +219,10 @@ def test_without_ray_the_ray_backend_is_exit_2_with_the_install_command() -> Non
 # ---------------------------------------------------------------------- recording
 
 
-def test_a_sweep_recording_appears_complete_with_its_report(tmp_path: Path) -> None:
+@pytest.mark.slow
+def test_a_sweep_recording_appears_complete_with_its_report(cli: Cli, tmp_path: Path) -> None:
     path = tmp_path / "sweep.rrd"
-    proc = run_cli(
+    proc = cli(
         "sweep", "--trials", "3", "--seed", "2", "--vary", "pose_noise=0:0.03",
         "--record", str(path), "--json",
     )  # fmt: skip
@@ -229,6 +237,7 @@ def test_a_sweep_recording_appears_complete_with_its_report(tmp_path: Path) -> N
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.rrd"]  # no temp, no lock
 
 
+@pytest.mark.slow
 def test_a_compared_sweep_is_recorded_per_arm(tmp_path: Path) -> None:
     plan = parse_vary(["brick_mass=0.2:3"])
     req = SweepRequest(

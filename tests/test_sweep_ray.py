@@ -1,6 +1,7 @@
 """The Ray backend gives the process backend's per-seed outcomes, on a cluster this test starts.
 
 CI installs the ``ray`` extra (the README's test command); without Ray these tests are skipped.
+Both start Ray clusters: the full tier (``slow``).
 """
 
 from __future__ import annotations
@@ -11,8 +12,10 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -32,7 +35,7 @@ BACKEND_FIELDS = {*SWEEP_WALL_TIME_FIELDS, "backend", "workers"}
 CLUSTER = """
 import logging, sys
 import ray
-ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False,
          logging_level=logging.ERROR, object_store_memory=128 * 1024 * 1024)
 print(ray.get_runtime_context().gcs_address, flush=True)
 sys.stdin.read()  # until the test closes it
@@ -67,10 +70,11 @@ def local_cluster() -> Iterator[str]:
             proc.wait()
 
 
-def cli(*args: str) -> subprocess.Popen[str]:
+def cli(*args: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    """``pickplace ARGS`` in a subprocess, ``env`` added to the environment."""
     # Ray's clusters use token authentication (the token in ~/.ray, shared on this machine);
     # a driver that joins one says so.
-    env = dict(os.environ, RAY_AUTH_MODE="token")
+    env = dict(os.environ, RAY_AUTH_MODE="token", **(env or {}))
     return subprocess.Popen(
         [sys.executable, "-m", "pickplace.cli", *args],
         stdout=subprocess.PIPE,
@@ -109,16 +113,68 @@ def test_ray_and_process_backends_give_identical_per_seed_outcomes_for_200_trial
 
 
 @pytest.mark.slow
+def test_without_an_address_a_sweep_starts_its_own_cluster_where_another_is_recorded() -> None:
+    """``ray start`` records its cluster in ``<temp dir>/ray/ray_current_cluster``, and
+    ``ray.init()`` without an address joins the cluster recorded there (and refuses the CPUs
+    given: exit 2). A sweep without ``--address`` starts its own all the same. (A temporary
+    Ray folder of the test's: the machine's ``/tmp/ray`` is everyone's.)"""
+    with (
+        local_cluster() as address,
+        tempfile.TemporaryDirectory(prefix="pp-ray-", dir="/tmp") as tmp,  # short socket paths
+    ):
+        (Path(tmp) / "ray").mkdir()
+        (Path(tmp) / "ray" / "ray_current_cluster").write_text(address)
+        proc = cli(
+            "sweep", "--backend", "ray", "--workers", "1", "--trials", "1", "--json",
+            env={"RAY_TMPDIR": tmp},
+        )  # fmt: skip
+        out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    report = json.loads(out)
+    assert report["backend"] == "ray" and report["workers"] == 1 and report["successes"] == 1
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process started by ``pid``, its children's children and so on."""
+    found: list[int] = []
+    todo = [pid]
+    while todo:
+        for task in Path(f"/proc/{todo.pop()}/task").glob("*"):
+            with contextlib.suppress(OSError):
+                children = [int(c) for c in (task / "children").read_text().split()]
+                found += children
+                todo += children
+    return found
+
+
+def runs_a_trial(pid: int) -> bool:
+    """True once a Ray worker of the cluster that ``pid`` started runs a trial (Ray names a
+    worker's process after its task)."""
+    for child in descendants(pid):
+        with contextlib.suppress(OSError):
+            if Path(f"/proc/{child}/cmdline").read_bytes().startswith(b"ray::guarded_trial"):
+                return True
+    return False
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
 def test_a_ray_sweep_on_its_own_cluster_stops_on_sigterm_with_a_partial_report() -> None:
+    """Signalled once trials run: the sweep's own handler has SIGTERM again. (Until ray.init
+    returns, Ray's handlers have it, and starting the cluster takes 5 to 25 s on a loaded
+    2-core machine: a fixed wait of 15 s sometimes signalled Ray instead.)"""
     proc = cli("sweep", "--backend", "ray", "--workers", "2", "--trials", "400", "--json")
-    time.sleep(15.0)  # the cluster is up, trials are running
+    deadline = time.monotonic() + 300
+    while not runs_a_trial(proc.pid):  # the cluster is up, trials are running
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
     assert proc.poll() is None
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
     took = time.monotonic() - t0
     assert proc.returncode == 128 + signal.SIGTERM
-    assert took < 10.0, took  # cancel the tasks, stop the cluster
+    assert took < 10.0, took  # cancel the tasks, stop the cluster (README: about 2 s)
     assert err.strip() == "pickplace: stopped by SIGTERM"
     report = json.loads(out)
     assert report["interrupted"] is True

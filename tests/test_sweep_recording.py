@@ -290,6 +290,7 @@ def test_bad_input_is_refused(scene: Scene, tmp_path: Path) -> None:
         write_sweep_recording(tmp_path / "missing" / "z.rrd", trials, {}, scene=scene)
 
 
+@pytest.mark.slow
 def test_a_real_sweep_is_recorded(tmp_path: Path, scene: Scene) -> None:
     summaries: list[dict[str, Any]] = []
     req = SweepRequest("pick-place-random", "qp", trials=3, first_seed=4, workers=1)

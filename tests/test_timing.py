@@ -25,6 +25,7 @@ from pickplace.planning.timing import (
 )
 from pickplace.planning.trajectory import Keyframe
 from pickplace.run.runner import RunRequest, prepare
+from tests.conftest import finished
 
 V_MAX = np.array([1.48, 1.48, 1.75, 1.31, 2.27, 2.36, 2.36])
 A_MAX = np.array([8.57, 8.57, 8.74, 11.36, 12.23, 15.72, 15.72])
@@ -171,6 +172,7 @@ def test_retimed_plan_keeps_its_path_and_phases_and_beats_the_cartesian_timing()
     assert timed.trajectory.end_time < 5.0  # the Cartesian timing took 13.9 s
 
 
+@pytest.mark.slow
 def test_quarter_speed_takes_about_four_times_as_long_and_succeeds() -> None:
     _, fast_task, _ = prepare(RunRequest())
     _, slow_task, slow = prepare(RunRequest(speed=0.25))
@@ -189,8 +191,8 @@ def test_quarter_speed_takes_about_four_times_as_long_and_succeeds() -> None:
 
 
 def test_the_cycle_time_bound_is_a_lower_bound_of_the_run() -> None:
-    _, task, sim = prepare(RunRequest())
-    s = sim.run().summary()
+    run = finished()  # the nominal run
+    sim, task, s = run.sim, run.sim.task, run.summary()
     assert s["success"]
     args = (task.trajectory.keyframes, sim.dt, sim.log.q_cmd, sim.scene.robot.v_max)
     bound, at_speed_limits = cycle_time_bound(*args), cycle_time_at_speed_limits(*args)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import mujoco
 import numpy as np
@@ -17,7 +18,7 @@ from pickplace.sim.variation import apply_to_scene, brick_offset_W
 from pickplace.sim.vary import ParameterDraw, parse_vary
 from pickplace.world.placements import brick_on_floor, nominal_placement
 from pickplace.world.scene import Scene
-from tests.conftest import run_cli_json
+from tests.conftest import CliRun, finished, one_json
 
 G = 9.81
 
@@ -108,6 +109,7 @@ def test_grip_force_sets_the_limit_and_keeps_the_grip_saturated(
         assert kv == pytest.approx(math.sqrt(gain) * kv0)  # the same damping ratio
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("force", [20.0, 80.0])
 def test_the_held_brick_is_squeezed_with_the_varied_force(force: float) -> None:
     _, task, sim = prepare(RunRequest("pick-place", parameters=draw(grip_force=force)))
@@ -130,6 +132,7 @@ def test_the_planner_slip_budget_knows_mass_friction_and_grip(scene: Scene) -> N
     assert nominal == pytest.approx(1.0 * 2 * 40.0 / 0.2)
 
 
+@pytest.mark.slow
 def test_a_brick_too_heavy_for_the_slip_budget_is_carried_with_a_warning() -> None:
     # The slip budget 2·μ·F / (m · safety 2) must hold g at rest: m < 80 / (2 g) = 4.08 kg.
     # Beyond it the plan is timed by the friction alone (to 8.2 kg), then by the robot alone;
@@ -186,21 +189,25 @@ def test_pose_noise_keeps_the_brick_inside_the_bin() -> None:
     assert moved[2] == X_WO.translation()[2]
 
 
-def test_a_run_records_its_parameters_and_the_cli_reproduces_them() -> None:
+@pytest.mark.slow
+def test_a_run_records_its_parameters_and_the_cli_reproduces_them(
+    cli: Callable[..., CliRun],
+) -> None:
     plan = parse_vary(["brick_mass=0.2:1.5", "friction=0.6,1"])
     summary = run(RunRequest("pick-place-random", seed=6, parameters=plan.draw(6))).summary()
     assert summary["parameters"] == plan.draw(6).as_dict()
-    code, cli = run_cli_json(
-        "--scenario", "pick-place-random", "--seed", "6",
-        "--vary", "brick_mass=0.2:1.5", "--vary", "friction=0.6,1",
+    proc = cli(
+        "run", "--scenario", "pick-place-random", "--seed", "6",
+        "--vary", "brick_mass=0.2:1.5", "--vary", "friction=0.6,1", "--json",
     )  # fmt: skip
-    assert code == (0 if summary["success"] else 1)
+    assert proc.returncode == (0 if summary["success"] else 1)
+    printed = one_json(proc.stdout, proc.stderr)
     for key in ("parameters", "success", "failure", "brick_start_xyz", "place_error_m"):
-        assert cli[key] == summary[key], key
+        assert printed[key] == summary[key], key
 
 
 def test_runs_without_variations_have_no_parameters_key() -> None:
-    assert "parameters" not in run(RunRequest("pick-place")).summary()
+    assert "parameters" not in finished().summary()  # the nominal run
 
 
 @pytest.mark.parametrize(
@@ -229,14 +236,12 @@ def test_drawn_speed_and_control_rate_are_the_runs() -> None:
     assert slow > 1.5 * nominal.task.trajectory.end_time
 
 
-def test_bad_vary_on_the_cli_is_exit_2_with_the_valid_names() -> None:
-    from tests.conftest import run_cli
-
-    proc = run_cli("run", "--vary", "mass=3")
+def test_bad_vary_on_the_cli_is_exit_2_with_the_valid_names(cli: Callable[..., CliRun]) -> None:
+    proc = cli("run", "--vary", "mass=3")
     assert proc.returncode == 2
     (line,) = proc.stderr.strip().splitlines()
     for name in ("brick_mass [kg]", "brick_size [-]", "friction", "grip_force [N]",
                  "pose_noise [m]", "speed", "control_rate [Hz]"):  # fmt: skip
         assert name in line
-    proc = run_cli("run", "--vary", "brick_mass=12:0.2")
+    proc = cli("run", "--vary", "brick_mass=12:0.2")
     assert proc.returncode == 2 and "LOW must be below HIGH" in proc.stderr

@@ -119,6 +119,9 @@ def _init(ray: ModuleType, address: str | None, workers: int | None) -> None:
     }
     if address is None:
         options.update(
+            # "local": a new cluster even when another one runs on this machine (without it
+            # ray.init joins the one /tmp/ray/ray_current_cluster names, and refuses num_cpus).
+            address="local",
             num_cpus=workers or available_cpus(),
             num_gpus=0,
             object_store_memory=LOCAL_OBJECT_STORE_BYTES,
