@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from pickplace.robot.registry import bundled_robots
 from pickplace.sim.scenarios import SCENARIOS
 from tests.conftest import REPO, CliRun, finished, one_json, run_cli_json, without_wall_time
 from tests.toy_robot import BAD_CASES, write_toy_robot
@@ -207,9 +208,10 @@ def test_an_unknown_robot_lists_the_bundled_ones(cli: Cli, command: str, tmp_pat
     proc = cli(command, "--robot", "no-such-robot")
     assert proc.returncode == 2
     assert proc.stderr.strip() == (
-        "pickplace: error: --robot: unknown robot 'no-such-robot'; valid: iiwa14-wsg50, "
-        "panda-hand, ur5e-2f85, a robot.toml path or a folder holding one"
+        f"pickplace: error: --robot: unknown robot 'no-such-robot'; valid: "
+        f"{', '.join(bundled_robots())}, a robot.toml path or a folder holding one"
     )
+    assert "iiwa14-wsg50, " in proc.stderr
     missing = tmp_path / "robot.toml"
     proc = cli(command, "--robot", str(missing))
     assert proc.returncode == 2
@@ -220,8 +222,8 @@ def test_robots_are_listed_with_joints_gripper_width_force_and_file(cli: Cli) ->
     proc = cli("robots", "--json")
     assert proc.returncode == 0, proc.stderr
     rows = {r["name"]: r for r in json.loads(proc.stdout)["robots"]}
-    assert set(rows) == {"iiwa14-wsg50", "panda-hand", "ur5e-2f85"}
-    assert {n: r["joints"] for n, r in rows.items()} == {
+    assert set(rows) == set(bundled_robots())
+    assert {n: rows[n]["joints"] for n in ("iiwa14-wsg50", "panda-hand", "ur5e-2f85")} == {
         "iiwa14-wsg50": 7,
         "panda-hand": 7,
         "ur5e-2f85": 6,
@@ -235,7 +237,7 @@ def test_robots_are_listed_with_joints_gripper_width_force_and_file(cli: Cli) ->
         assert r["open_width_m"] > 0.05  # wider than the brick
         assert r["squeeze_force_n"] > 10.0
     text = cli("robots")
-    assert text.returncode == 0 and len(text.stdout.strip().splitlines()) == 3
+    assert text.returncode == 0 and len(text.stdout.strip().splitlines()) == len(rows)
 
 
 @pytest.mark.slow

@@ -15,6 +15,7 @@ from pickplace.cli import _human_summary
 from pickplace.planning.planner import PickPlacePlanner
 from pickplace.robot import listing
 from pickplace.robot.description import RobotDescription
+from pickplace.robot.registry import bundled_robots
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.catalog import CATALOG
 from pickplace.sim.parameters import PARAMETERS
@@ -118,7 +119,7 @@ def test_a_robot_folder_is_read_through_its_robot_toml(tmp_path: Path) -> None:
     assert proc.returncode == 2
     assert proc.stderr.strip() == (
         f"pickplace: error: --robot: robot folder '{empty}' holds no robot.toml; valid: "
-        "iiwa14-wsg50, panda-hand, ur5e-2f85, a robot.toml path or a folder holding one"
+        f"{', '.join(bundled_robots())}, a robot.toml path or a folder holding one"
     )
 
 
@@ -128,7 +129,7 @@ def test_robot_rows_are_remembered_by_what_they_are_measured_from(
     monkeypatch.setenv("PICKPLACE_CACHE_DIR", str(tmp_path))
     first = listing.robot_rows()
     cache = json.loads((tmp_path / listing.CACHE_FILE).read_text())
-    assert len(cache) == len(first) == 3
+    assert len(cache) == len(first) == len(bundled_robots())
     measured: list[str] = []
 
     def stub(desc: RobotDescription) -> dict[str, Any]:
@@ -140,7 +141,7 @@ def test_robot_rows_are_remembered_by_what_they_are_measured_from(
     (tmp_path / listing.CACHE_FILE).write_text("not json")
     again = listing.robot_rows()  # a broken cache is measured again (here: by the stub)
     assert measured == [r["name"] for r in first]
-    assert [r["joints"] for r in again] == [-1, -1, -1]
+    assert [r["joints"] for r in again] == [-1] * len(first)
 
 
 def test_sweep_report_has_its_recording_line_and_counts_seeds_in_a_comparison(
