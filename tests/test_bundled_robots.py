@@ -64,6 +64,7 @@ RANDOM_SEEDS = 50
 REACH_HEIGHT = 0.30  # the singular reach's tool height [m]
 
 
+@pytest.mark.slow  # composes every robot, or starts CLI processes
 def test_three_robots_are_bundled_with_six_and_seven_joints() -> None:
     assert {"iiwa14-wsg50", "panda-hand", "ur5e-2f85"} <= set(ROBOTS)
     assert {load_scene(robot=r).robot.n_joints for r in ROBOTS} == {6, 7}

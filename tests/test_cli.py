@@ -218,6 +218,7 @@ def test_an_unknown_robot_lists_the_bundled_ones(cli: Cli, command: str, tmp_pat
     assert f"{missing}: robot description does not exist" in proc.stderr
 
 
+@pytest.mark.slow  # composes every robot, or starts CLI processes
 def test_robots_are_listed_with_joints_gripper_width_force_and_file(cli: Cli) -> None:
     proc = cli("robots", "--json")
     assert proc.returncode == 0, proc.stderr

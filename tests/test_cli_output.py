@@ -89,6 +89,7 @@ def test_a_refused_run_prints_the_refusal_not_a_run_s_metrics() -> None:
     assert len(advice.split(";")) >= 2  # a change for the problems, and where to look
 
 
+@pytest.mark.slow  # composes every robot, or starts CLI processes
 def test_a_varied_run_prints_what_it_drew_with_units() -> None:
     proc = run_cli("run", "--vary", "brick_mass=0.5:15", "--vary", "friction=0.8", "--seed", "0")
     line = next(s for s in proc.stdout.splitlines() if s.startswith("  parameters: "))
@@ -107,6 +108,7 @@ def test_a_failed_run_names_the_failure_s_tick() -> None:
     assert "(tick " in line and ", t=" in line
 
 
+@pytest.mark.slow  # composes every robot, or starts CLI processes
 def test_a_robot_folder_is_read_through_its_robot_toml(tmp_path: Path) -> None:
     copy = tmp_path / "my-panda"
     shutil.copytree(REPO / "robots" / "panda-hand", copy)
@@ -144,6 +146,7 @@ def test_robot_rows_are_remembered_by_what_they_are_measured_from(
     assert [r["joints"] for r in again] == [-1] * len(first)
 
 
+@pytest.mark.slow  # composes every robot, or starts CLI processes
 def test_sweep_report_has_its_recording_line_and_counts_seeds_in_a_comparison(
     tmp_path: Path,
 ) -> None:

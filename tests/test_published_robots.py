@@ -134,6 +134,7 @@ def test_the_base_is_raised_off_a_floor_its_shoulder_would_touch(tmp_path: Path)
     assert any("arm base raised" in r for r in comp.robot.repairs)
 
 
+@pytest.mark.slow  # composes every robot, or starts CLI processes
 def test_a_second_process_reads_the_calibration_from_disk(tmp_path: Path) -> None:
     script = (
         "import json, sys\n"
