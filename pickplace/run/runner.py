@@ -24,6 +24,7 @@ import mujoco
 
 from pickplace.control.controllers import CONTROLLERS, make_controller
 from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.outfile import lock_path, lock_problem, name_max
 from pickplace.planning.planner import Candidate, PlanningReport
 from pickplace.planning.preflight import Preflight, PreflightConfig
 from pickplace.planning.timing import TimingConfig
@@ -130,8 +131,10 @@ def validate_record_path(path: Path) -> Path:
     read-only file system.
 
     Raises:
-        InvalidInputError: Empty name, wrong suffix, a directory, a FIFO or device, a read-only
-            file, a missing or read-only folder, or a symlink into a missing folder.
+        InvalidInputError: Empty name, wrong suffix, a name longer than the file system allows,
+            a directory, a FIFO or device, a read-only file, a missing or read-only folder, a
+            symlink into a missing folder, or a lock file beside it that is a link or not a
+            plain file (:func:`pickplace.outfile.lock_problem`).
     """
     name = path.name
     if name in ("", ".", ".."):
@@ -145,6 +148,13 @@ def validate_record_path(path: Path) -> Path:
     if path.suffix != ".rrd":
         raise InvalidInputError(
             f"recording file '{path}' must end in .rrd (e.g. run.rrd)", field="record"
+        )
+    limit = name_max(path.parent)
+    if len(os.fsencode(name)) > limit:
+        raise InvalidInputError(
+            f"recording file name '{name[:40]}…' is {len(os.fsencode(name))} bytes long; this "
+            f"file system allows at most {limit}",
+            field="record",
         )
     target = path
     if path.is_symlink():
@@ -160,6 +170,9 @@ def validate_record_path(path: Path) -> Path:
         raise InvalidInputError(
             f"recording file '{path}': folder '{parent}' does not exist", field="record"
         )
+    problem = lock_problem(lock_path(target))
+    if problem is not None:
+        raise InvalidInputError(f"recording file '{path}': {problem}", field="record")
     if target.is_dir():
         raise InvalidInputError(
             f"recording file '{path}' is a directory; give a file name ending .rrd", field="record"
