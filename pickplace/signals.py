@@ -88,6 +88,17 @@ class InterruptHandler:
         if _active is self:
             _active = None
 
+    def retire(self) -> None:
+        """Ignore the stop signals from now on, in place of this handler: for a process whose
+        work is done and that only exits (restoring the default action would let a late
+        signal kill it in the middle of its exit, after its output said how it ended)."""
+        global _active
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
+        self._previous.clear()
+        if _active is self:
+            _active = None
+
     # ------------------------------------------------------------------ state
 
     @property

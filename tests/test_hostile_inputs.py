@@ -9,14 +9,30 @@ the file and the field, and what would be valid.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from pickplace.errors import OutputError
 from pickplace.outfile import OutputFile
-from tests.test_robustness import clean_stderr, cli, complete_rrd, finish, one_json
+from tests.conftest import REPO
+from tests.test_robustness import (
+    SLOW,
+    clean_stderr,
+    cli,
+    complete_rrd,
+    finish,
+    handles,
+    one_json,
+    wait_for_run,
+)
 
 PRECIOUS = "precious\n"
 
@@ -71,3 +87,125 @@ def test_a_record_name_beyond_the_file_system_limit_is_bad_input(tmp_path: Path)
     (line,) = clean_stderr(err)
     assert "--record" in line and "256 bytes long" in line and "at most 255" in line
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------- signals
+
+
+def console(*args: str, **kw: Any) -> subprocess.Popen[str]:
+    """``python -m pickplace ARGS``: the console script's entry, which installs the stop-signal
+    handlers before it imports the CLI (``python -m pickplace.cli`` imports it first)."""
+    kw.setdefault("stdout", subprocess.PIPE)
+    kw.setdefault("stderr", subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-m", "pickplace", *args], cwd=kw.pop("cwd", REPO), text=True, **kw
+    )
+
+
+def wait_for_handlers(proc: subprocess.Popen[str]) -> None:
+    """Until ``proc`` catches SIGHUP: pickplace's handlers are in, its imports just begin."""
+    deadline = time.monotonic() + 30
+    while not handles(proc.pid, signal.SIGHUP):
+        assert proc.poll() is None and time.monotonic() < deadline
+        time.sleep(0.002)
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc")
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=str)
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_a_stop_signal_during_the_imports_is_a_clean_stop(
+    sig: signal.Signals, command: str
+) -> None:
+    args = ["run", "--json"] if command == "run" else ["sweep", "--trials", "2", "--json"]
+    proc = console(*args)
+    wait_for_handlers(proc)
+    proc.send_signal(sig)  # MuJoCo, numpy and the package are still being imported
+    code, out, err = finish(proc, 60)
+    assert code == 128 + sig
+    (line,) = clean_stderr(err)
+    assert line.startswith(f"pickplace: stopped by {sig.name}")
+    if command == "run":  # the run starts, and stops at its first block, with a summary
+        assert one_json(out)["failure"] == "interrupted"
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc")
+def test_a_hangup_of_the_whole_group_during_the_imports_leaves_no_traceback() -> None:
+    proc = console("run", "--json", start_new_session=True)
+    wait_for_handlers(proc)
+    os.killpg(proc.pid, signal.SIGHUP)  # a closed terminal: every process of the group
+    code, out, err = finish(proc, 60)
+    assert code == 129
+    clean_stderr(err)
+    assert one_json(out)["failure"] == "interrupted"
+
+
+def children_seen(proc: subprocess.Popen[str]) -> set[int]:
+    """Every child process of ``proc`` seen while it runs (polled every millisecond)."""
+    seen: set[int] = set()
+    path = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
+    while proc.poll() is None:
+        with contextlib.suppress(OSError):
+            seen.update(int(c) for c in path.read_text().split())
+        time.sleep(0.001)
+    return seen
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
+def test_a_run_starts_no_child_process_that_a_hangup_could_break() -> None:
+    # Importing MuJoCo with OpenGL probes glfw in a child Python, which a SIGHUP to the group
+    # killed mid-pipe (a BrokenPipeError traceback); a run renders nothing with MuJoCo.
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    proc = console("run", "--json", env=env)
+    assert children_seen(proc) == set()
+    code, out, err = finish(proc)
+    assert code == 0, err
+    assert one_json(out)["success"] is True
+
+
+def signal_until_it_exits(proc: subprocess.Popen[str], sig: signal.Signals) -> None:
+    """Send ``sig`` every few milliseconds until ``proc`` has exited (at most 30 s)."""
+    deadline = time.monotonic() + 30
+    while proc.poll() is None and time.monotonic() < deadline:
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(sig)
+        time.sleep(0.005)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=str)
+def test_signals_after_the_summary_change_neither_the_output_nor_the_exit_code(
+    sig: signal.Signals,
+) -> None:
+    proc = console("scenarios", "--json")
+    assert proc.stdout is not None
+    first = proc.stdout.readline()  # the whole output: the process is now only exiting
+    signal_until_it_exits(proc, sig)
+    code, rest, err = finish(proc, 30)
+    assert code == 0, (code, err)
+    assert err == ""
+    one_json(first + rest)
+
+
+def test_sigterm_then_repeated_ctrl_c_exits_143_as_the_message_says(tmp_path: Path) -> None:
+    rrd = tmp_path / "twice.rrd"
+    proc = console("run", "--record", str(rrd), "--speed", SLOW, "--pace", "3", "--json")
+    wait_for_run(proc, rrd)
+    proc.send_signal(signal.SIGTERM)
+    # (Two signals pending at once are handled in signal-number order: leave the first alone.)
+    time.sleep(0.3)
+    signal_until_it_exits(proc, signal.SIGINT)  # through the finishing, the summary, the exit
+    code, out, err = finish(proc, 60)
+    assert code == 143
+    (line,) = clean_stderr(err)
+    assert line == "pickplace: stopped by SIGTERM"
+    assert one_json(out)["failure"] == "interrupted"
+    complete_rrd(rrd)
+
+
+def test_help_and_version_to_a_reader_that_has_gone_are_exit_141_like_any_output() -> None:
+    for args in (["run", "--help"], ["--version"]):
+        proc = console(*args)
+        assert proc.stdout is not None
+        proc.stdout.close()  # the reader is gone before the output is written
+        code, _, err = finish(proc)
+        assert code == 141, args
+        assert err == ""
