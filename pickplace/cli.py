@@ -144,7 +144,7 @@ def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
         "--speed",
         type=_finite_float,
         default=1.0,
-        help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
+        help="speed override in [0.001, 1]: scales every speed limit (accelerations by its square)",
     )
     _add_vary(p, vary_help)
 
@@ -228,7 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--speed",
         type=_finite_float,
         default=1.0,
-        help="speed override in (0, 1] for every trial (or --vary speed=...)",
+        help="speed override in [0.001, 1] for every trial (or --vary speed=...)",
     )
     sweep.add_argument(
         "--control-rate",
@@ -497,8 +497,14 @@ def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.run.runner import plan_report, resolve_request
 
     req = _task_request(args)
-    resolved = resolve_request(req)
-    report = plan_report(resolved)
+    stop.arm()  # nothing to finish or keep: a stop signal ends the planning at once
+    try:
+        report = plan_report(resolved := resolve_request(req))
+    except Interrupted:
+        _to_stderr(f"pickplace: stopped by {signal_name(stop.signum or 2)} while planning")
+        return stop.exit_code
+    finally:
+        stop.disarm()
     out = {
         "scenario": req.scenario,
         "robot": resolved.robot.name,

@@ -209,3 +209,98 @@ def test_help_and_version_to_a_reader_that_has_gone_are_exit_141_like_any_output
         code, _, err = finish(proc)
         assert code == 141, args
         assert err == ""
+
+
+# ---------------------------------------------------------------------------- long planning
+
+# At 0.3 % of the speed limits the nominal plan lasts about 1100 s: its pre-flight runs for
+# many seconds of wall time (planning at full speed takes a tenth of a second).
+CRAWL = "0.003"
+
+
+@pytest.mark.parametrize(
+    ("command", "sig", "message"),
+    [
+        ("plan", signal.SIGTERM, "pickplace: stopped by SIGTERM while planning"),
+        ("run", signal.SIGINT, "pickplace: stopped by SIGINT before the run started"),
+    ],
+)
+def test_a_stop_signal_ends_a_long_planning_promptly(
+    tmp_path: Path, command: str, sig: signal.Signals, message: str
+) -> None:
+    rrd = tmp_path / "never.rrd"
+    rrd.write_text(PRECIOUS)
+    extra = ["--record", str(rrd)] if command == "run" else []
+    proc = console(command, "--speed", CRAWL, *extra, "--json")
+    time.sleep(5.0)  # imports done, the pre-flight of the long plan under way
+    assert proc.poll() is None, proc.communicate()
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    code, out, err = finish(proc, 60)
+    took = time.monotonic() - t0
+    assert code == 128 + sig
+    assert took < 4.0, took  # 1 s for a normal set-up to reach the run, then at once
+    assert clean_stderr(err) == [message]
+    assert out == ""
+    assert rrd.read_text() == PRECIOUS
+    assert [p.name for p in tmp_path.iterdir()] == ["never.rrd"]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["plan", "--speed", "1e-9"],
+        ["run", "--speed", "1e-4"],
+        ["sweep", "--trials", "2", "--speed", "2"],
+    ],
+    ids=lambda a: " ".join(a),
+)
+def test_speed_overrides_that_would_plan_for_hours_are_bad_input(args: list[str]) -> None:
+    t0 = time.monotonic()
+    code, out, err = finish(cli(*args), 60)
+    assert code == 2
+    assert time.monotonic() - t0 < 30.0  # refused before any planning
+    (line,) = clean_stderr(err)
+    assert line.startswith("pickplace: error: --speed: speed must be a number in [0.001, 1]")
+    assert out == ""
+
+
+def robot_with(folder: Path, **fields: str) -> Path:
+    """The default robot's files in ``folder``, with ``fields`` of robot.toml replaced or
+    added (``"gripper.mount_pos"`` for a gripper field), as TOML text."""
+    src = REPO / "robots" / "iiwa14-wsg50"
+    for name in ("arm.xml", "gripper.xml"):
+        (folder / name).write_text((src / name).read_text())
+    lines = (src / "robot.toml").read_text().splitlines()
+    for key, value in fields.items():
+        section, _, name = key.rpartition(".")
+        section = section or "arm"
+        lines = [line for line in lines if not line.startswith(f"{name} =")]
+        at = lines.index(f"[{section}]") + 1
+        lines.insert(at, f"{name} = {value}")
+    (folder / "robot.toml").write_text("\n".join(lines) + "\n")
+    return folder / "robot.toml"
+
+
+def test_a_plan_longer_than_an_hour_is_refused_before_its_preflight(tmp_path: Path) -> None:
+    # Half the default speed limits at the lowest speed override: a plan of about two hours.
+    slow = "[0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18]"
+    robot = robot_with(tmp_path, speed_limits=slow)
+    t0 = time.monotonic()
+    code, out, err = finish(cli("plan", "--robot", str(robot), "--speed", "0.001"), 60)
+    assert code == 2
+    assert time.monotonic() - t0 < 30.0
+    (line,) = clean_stderr(err)
+    assert "the timed plan lasts" in line and "at most 3600 s" in line and "--speed" in line
+    assert out == ""
+
+
+def test_a_run_whose_tick_log_would_not_fit_in_memory_is_refused(tmp_path: Path) -> None:
+    rrd = tmp_path / "huge.rrd"
+    args = ["run", "--speed", "0.004", "--control-rate", "500", "--record", str(rrd)]
+    code, out, err = finish(cli(*args), 120)
+    assert code == 2
+    (line,) = clean_stderr(err)
+    assert "its tick log" in line and "valid: at most 1 GiB" in line
+    assert out == ""
+    assert list(tmp_path.iterdir()) == []

@@ -41,6 +41,7 @@ from pickplace.planning.grasp import brick_width_across, top_down_grasps, yaw_of
 from pickplace.planning.plan import Plan, PlanConfig, for_gripper, plan_pick_place, swung_pose
 from pickplace.planning.preflight import Preflight, PreflightConfig, PreflightResult
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
+from pickplace.signals import stop_point
 from pickplace.world.scene import Scene
 
 # Clearance of the via-point above the higher bin wall: brick height hanging below the tool
@@ -201,6 +202,7 @@ class PickPlacePlanner:
         tried: list[Candidate] = []
         chosen: int | None = None
         for label, X_OG in self.grasps(X_WO_pick):
+            stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
             plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, X_OG)
             tried.append(Candidate(label, plan, result, warning))
             if result.feasible and chosen is None:

@@ -27,7 +27,7 @@ from pickplace.errors import InvalidInputError, UnknownNameError
 from pickplace.outfile import lock_path, lock_problem, name_max
 from pickplace.planning.planner import Candidate, PlanningReport
 from pickplace.planning.preflight import Preflight, PreflightConfig
-from pickplace.planning.timing import TimingConfig
+from pickplace.planning.timing import TimingConfig, check_speed
 from pickplace.record.viewer import parse_viewer_url
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
@@ -301,6 +301,7 @@ def validate_request(req: RunRequest) -> Scenario:
         raise InvalidInputError(
             f"seed must be an integer in [0, {MAX_SEED}], got {req.seed!r}", field="seed"
         )
+    check_speed(req.speed)
     lo, hi = CONTROL_RATE_RANGE_HZ
     if not (
         isinstance(req.control_rate_hz, int | float)
