@@ -304,3 +304,76 @@ def test_a_run_whose_tick_log_would_not_fit_in_memory_is_refused(tmp_path: Path)
     assert "its tick log" in line and "valid: at most 1 GiB" in line
     assert out == ""
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------- robot files
+
+
+def bad_robot_line(robot: Path, *args: str, command: str = "plan") -> str:
+    """The one error line of ``pickplace COMMAND --robot ROBOT ARGS`` (exit 2, nothing on
+    stdout, no warning)."""
+    code, out, err = finish(cli(command, "--robot", str(robot), *args, cwd=robot.parent), 60)
+    assert code == 2, err
+    (line,) = clean_stderr(err)
+    assert line.startswith(f"pickplace: error: --robot: {robot}: "), line
+    assert "Warning" not in err
+    assert out == ""
+    assert not (robot.parent / "MUJOCO_LOG.TXT").exists()
+    return line
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "expected"),
+    [
+        (
+            "gripper.grip_force",
+            "1e300",
+            "grip_force: is 1e+300; valid: a number in [0.1, 10000] [N]",
+        ),
+        ("gripper.mount_pos", "[1e308, 0, 0]", "[gripper] mount_pos: value 1 of 3 is 1e+308"),
+        ("speed_limits", "[1e300, 1, 1, 1, 1, 1, 1]", "[arm] speed_limits: value 1 of 7"),
+        ("accel_limits", "[1e-9, 1, 1, 1, 1, 1, 1]", "[arm] accel_limits: value 1 of 7"),
+        ("home", "[1e300, 0, 0, 0, 0, 0, 0]", "[arm] home: value 1 of 7 is 1e+300"),
+    ],
+    ids=lambda v: str(v)[:30],
+)
+def test_robot_numbers_outside_physical_ranges_are_named_with_the_range(
+    tmp_path: Path, key: str, value: str, expected: str
+) -> None:
+    line = bad_robot_line(robot_with(tmp_path, **{key: value}))
+    assert expected in line and "valid: " in line
+
+
+def test_a_huge_bad_list_is_quoted_short(tmp_path: Path) -> None:
+    robot = robot_with(tmp_path, speed_limits="[" + ", ".join(["-1"] * 200_000) + "]")
+    line = bad_robot_line(robot)
+    assert "[arm] speed_limits: value 1 of 200000 is -1, not > 0" in line
+    assert len(line) < 400
+
+
+def test_a_bad_list_of_non_numbers_is_quoted_short(tmp_path: Path) -> None:
+    robot = robot_with(tmp_path, speed_limits="[" + ", ".join(['"x"'] * 200_000) + "]")
+    line = bad_robot_line(robot)
+    assert "[arm] speed_limits: must be a list of numbers" in line and "..." in line
+    assert len(line) < 400
+
+
+def test_speed_limits_of_the_wrong_length_are_blamed_on_the_speed_limits(tmp_path: Path) -> None:
+    line = bad_robot_line(robot_with(tmp_path, speed_limits="[1, 1, 1]"))
+    assert "[arm] speed_limits: has 3 values; valid: 7 positive numbers" in line
+    assert "accel_limits" not in line
+
+
+def test_a_description_nested_thousands_deep_is_one_line(tmp_path: Path) -> None:
+    robot = tmp_path / "robot.toml"
+    robot.write_text('name = "deep"\nx = ' + "[" * 5000 + "]" * 5000 + "\n")
+    line = bad_robot_line(robot)
+    assert "nested thousands deep" in line
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_a_bad_robot_is_refused_up_front_whatever_the_workers(tmp_path: Path, workers: str) -> None:
+    robot = robot_with(tmp_path, **{"gripper.grip_force": "1e300"})
+    args = ("--trials", "2", "--workers", workers, "--json")
+    line = bad_robot_line(robot, *args, command="sweep")
+    assert "[gripper] grip_force" in line
