@@ -371,6 +371,68 @@ def test_a_description_nested_thousands_deep_is_one_line(tmp_path: Path) -> None
     assert "nested thousands deep" in line
 
 
+def with_arm(folder: Path, arm: str, **fields: str) -> Path:
+    """:func:`robot_with`, its arm file then replaced by the text ``arm``."""
+    robot = robot_with(folder, **fields)
+    (folder / "arm.xml").write_text(arm)
+    return robot
+
+
+def default_arm(head: str = "", body: str = "") -> str:
+    """The default arm file with ``head`` after its compiler and ``body`` in its worldbody."""
+    text = (REPO / "robots" / "iiwa14-wsg50" / "arm.xml").read_text()
+    compiler = '<compiler angle="radian" autolimits="true"/>'
+    assert compiler in text and "<worldbody>" in text
+    return text.replace(compiler, compiler + head, 1).replace("<worldbody>", "<worldbody>" + body)
+
+
+@pytest.mark.parametrize("kind", ["directory", "FIFO", "character device"])
+@pytest.mark.parametrize("role", ["mjcf", "include", "mesh"])
+def test_a_folder_fifo_or_device_named_as_a_file_is_called_what_it_is(
+    tmp_path: Path, kind: str, role: str
+) -> None:
+    if kind == "directory":
+        (tmp_path / "thing").mkdir()
+        target = "thing"
+    elif kind == "FIFO":
+        os.mkfifo(tmp_path / "thing")  # reading it would block for ever
+        target = "thing"
+    else:
+        target = "/dev/zero"  # reading it would never end
+    if role == "mjcf":
+        robot = robot_with(tmp_path, mjcf=f'"{target}"')
+    elif role == "include":
+        robot = with_arm(tmp_path, default_arm(head=f'<include file="{target}"/>'))
+    else:
+        mesh = f'<asset><mesh name="m" file="{target}"/></asset>'
+        robot = with_arm(tmp_path, default_arm(head=mesh))
+    line = bad_robot_line(robot)
+    assert f"is a {kind}" in line and "does not exist" not in line and "[arm] mjcf" in line
+
+
+@pytest.mark.parametrize("case", ["includes itself", "50 MB", "500,000 bodies", "12 deep"])
+def test_pathological_arm_files_are_refused_in_bounded_time(tmp_path: Path, case: str) -> None:
+    if case == "includes itself":
+        robot = with_arm(tmp_path, default_arm(head='<include file="arm.xml"/>'))
+        expected = "includes itself ('arm.xml' -> 'arm.xml')"
+    elif case == "50 MB":
+        robot = with_arm(tmp_path, default_arm(head="<!-- " + "x" * 50_000_000 + " -->"))
+        expected = "valid: an MJCF file of at most 16777216 bytes"
+    elif case == "500,000 bodies":
+        robot = with_arm(tmp_path, default_arm(body="<body/>" * 500_000))
+        expected = "more than 20000 XML elements"
+    else:
+        for i in range(1, 13):
+            (tmp_path / f"c{i}.xml").write_text(f'<mujoco><include file="c{i + 1}.xml"/></mujoco>')
+        (tmp_path / "c13.xml").write_text("<mujoco/>")
+        robot = with_arm(tmp_path, default_arm(head='<include file="c1.xml"/>'))
+        expected = "is nested more than 8 deep; valid: at most 8 levels"
+    t0 = time.monotonic()
+    line = bad_robot_line(robot)
+    assert time.monotonic() - t0 < 30.0  # start-up and a bounded read (was 30 s to minutes)
+    assert expected in line and "[arm] mjcf" in line
+
+
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_a_bad_robot_is_refused_up_front_whatever_the_workers(tmp_path: Path, workers: str) -> None:
     robot = robot_with(tmp_path, **{"gripper.grip_force": "1e300"})
