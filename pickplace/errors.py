@@ -33,7 +33,13 @@ class InvalidInputError(PickPlaceError, ValueError):
 
 
 class SceneError(PickPlaceError):
-    """A scene file is missing, is not valid MJCF, or lacks a required element."""
+    """A scene (world) file is missing, is not valid MJCF, or lacks a required element.
+
+    ``field`` is the input it is about: the world file (``RunRequest.scene_path``,
+    ``--scene``).
+    """
+
+    field = "scene_path"
 
 
 class RobotError(PickPlaceError):

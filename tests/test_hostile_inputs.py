@@ -439,3 +439,52 @@ def test_a_bad_robot_is_refused_up_front_whatever_the_workers(tmp_path: Path, wo
     args = ("--trials", "2", "--workers", workers, "--json")
     line = bad_robot_line(robot, *args, command="sweep")
     assert "[gripper] grip_force" in line
+
+
+# ---------------------------------------------------------------------------- world files
+
+
+def world_with(folder: Path, old: str, new: str) -> Path:
+    """The default world file in ``folder`` with ``old`` replaced by ``new``."""
+    text = (REPO / "scenes" / "world.xml").read_text()
+    assert old in text
+    (folder / "world.xml").write_text(text.replace(old, new, 1))
+    return folder / "world.xml"
+
+
+BRICK = '<geom name="brick" type="box" size="0.0375 0.025 0.025" mass="0.2"'
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "expected"),
+    [
+        (BRICK, BRICK.replace('mass="0.2"', 'mass="0"'), "mass and inertia of moving bodies"),
+        (BRICK, BRICK.replace("0.0375 0.025 0.025", "0.3 0.3 0.3"), "larger than bin 'bin1'"),
+        (BRICK, BRICK.replace('type="box"', 'type="sphere"'), "brick geom 'brick' is a sphere"),
+        (
+            '<body name="brick" pos="0 -0.55 0.035">',
+            '<body name="brick" pos="nan -0.55 0.035">',
+            "contains a NaN",
+        ),
+        (
+            "<worldbody>",
+            '<asset><mesh name="junk" file="junk.stl"/></asset><worldbody>'
+            '<geom type="mesh" mesh="junk" pos="2 2 0"/>',
+            "junk.stl",
+        ),
+    ],
+    ids=["brick of mass 0", "oversized brick", "sphere brick", "brick at nan", "non-mesh mesh"],
+)
+def test_world_file_problems_are_blamed_on_the_world_file(
+    tmp_path: Path, old: str, new: str, expected: str
+) -> None:
+    (tmp_path / "junk.stl").write_text("not a mesh\n")
+    world = world_with(tmp_path, old, new)
+    code, out, err = finish(cli("run", "--scene", str(world), "--json", cwd=tmp_path), 60)
+    assert code == 2, err
+    (line,) = clean_stderr(err)
+    assert line.startswith(f"pickplace: error: --scene: scene file '{world}'"), line
+    assert expected in line and "valid: " in line
+    assert "robot.toml" not in line
+    assert out == ""
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

@@ -28,9 +28,12 @@ includes nested at most :data:`MAX_INCLUDE_DEPTH` deep, and a file that includes
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import re
+import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -468,8 +471,35 @@ def parse_world(path: Path) -> mujoco.MjSpec:
     problem = file_problem(path)
     if problem is not None:
         raise SceneError(f"scene file '{path}' {problem}; valid: an MJCF world file")
+    size = path.stat().st_size
+    if size > MAX_MJCF_BYTES:
+        raise SceneError(
+            f"scene file '{path}' is {size} bytes; valid: an MJCF world file of at most "
+            f"{MAX_MJCF_BYTES} bytes"
+        )
     try:
-        return mujoco.MjSpec.from_file(str(path))
+        with _parse_warnings() as warned:
+            spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
         detail = " ".join(str(exc).split())
         raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
+    if any("NaN" in w for w in warned):
+        raise SceneError(
+            f"scene file '{path}' contains a NaN (MuJoCo: {warned[0]}); valid: finite numbers"
+        )
+    for w in warned:  # anything else MuJoCo says while parsing: a Python warning
+        warnings.warn(f"MuJoCo: {w}", stacklevel=2)
+    return spec
+
+
+@contextlib.contextmanager
+def _parse_warnings() -> Iterator[list[str]]:
+    """Collect MuJoCo's C warnings in the block (instead of printing them and writing
+    ``MUJOCO_LOG.TXT``); yields the list, filled as they come."""
+    collected: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda text: collected.append(" ".join(text.split())))
+    try:
+        yield collected
+    finally:
+        mujoco.set_mju_user_warning(previous)
