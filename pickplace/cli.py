@@ -217,6 +217,13 @@ def build_parser() -> argparse.ArgumentParser:
         "trials in this process); with --backend ray the local cluster's CPUs, or the tasks in "
         "flight on a cluster at --address (default: its CPUs)",
     )
+    sweep.add_argument(
+        "--trial-timeout",
+        type=_finite_float,
+        metavar="SECONDS",
+        help="time limit of one trial in a worker process (default: 600 s): a worker without "
+        "a result by then (stopped, stuck) is killed and its trial fails with worker-timeout",
+    )
     _add_vary(sweep, "drawn per trial from its seed, recorded per trial in the report")
     sweep.add_argument(
         "--compare",
@@ -626,6 +633,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
         backend=args.backend,
         address=args.address,
         robot=args.robot or DEFAULT_ROBOT,
+        trial_timeout_s=args.trial_timeout,
     )
     resolved = req.validate()
     output = None

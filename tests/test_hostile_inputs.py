@@ -22,15 +22,18 @@ import pytest
 
 from pickplace.errors import OutputError
 from pickplace.outfile import OutputFile
+from pickplace.sweep.sweep import DEFAULT_TRIAL_TIMEOUT_S
 from tests.conftest import REPO
 from tests.test_robustness import (
     SLOW,
+    _workers,
     clean_stderr,
     cli,
     complete_rrd,
     finish,
     handles,
     one_json,
+    sweep_report,
     wait_for_run,
 )
 
@@ -488,3 +491,91 @@ def test_world_file_problems_are_blamed_on_the_world_file(
     assert "robot.toml" not in line
     assert out == ""
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+# ---------------------------------------------------------------------------- sweeps
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
+def test_a_stopped_worker_times_out_its_trial_and_the_sweep_goes_on() -> None:
+    timeout = 10.0  # [s]: several trials' time on a loaded machine
+    args = ["--trials", "6", "--workers", "2", "--seed", "7", "--trial-timeout", str(timeout)]
+    proc = cli("sweep", *args, "--json")
+    deadline = time.monotonic() + 60
+    while not (kids := _workers(proc.pid)):
+        assert proc.poll() is None and time.monotonic() < deadline
+        time.sleep(0.01)
+    os.kill(kids[0], signal.SIGSTOP)  # frozen with a trial in hand
+    try:
+        code, out, err = finish(proc, 120)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(kids[0], signal.SIGKILL)
+    assert code == 1
+    clean_stderr(err)
+    report = sweep_report(out)
+    assert report["completed"] == 6 and report["interrupted"] is False
+    assert report["failures_by_reason"] == {"worker-timeout": 1}
+    (lost,) = [t for t in report["trial_results"] if t.get("lost")]
+    assert lost["seed"] in range(7, 13)
+    assert lost["detail"] == f"no result within {timeout:g} s (--trial-timeout); worker killed"
+    assert not Path(f"/proc/{kids[0]}").exists()  # killed, not left stopped
+
+
+def test_the_trial_timeout_is_documented_and_checked() -> None:
+    code, out, _ = finish(cli("sweep", "--help"))
+    assert code == 0
+    assert f"(default: {DEFAULT_TRIAL_TIMEOUT_S:g} s)" in " ".join(out.split())
+    for value, expected in (("0.5", "must be in [1, 86400] s"), ("5", "Ray tasks have no")):
+        extra = ["--backend", "ray"] if value == "5" else []
+        code, out, err = finish(cli("sweep", "--trial-timeout", value, *extra), 60)
+        assert code == 2
+        (line,) = clean_stderr(err)
+        assert line.startswith("pickplace: error: --trial-timeout") and expected in line
+        assert out == ""
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
+def test_a_killed_worker_says_by_which_signal() -> None:
+    proc = cli("sweep", "--trials", "6", "--workers", "2", "--json")
+    deadline = time.monotonic() + 60
+    while not (kids := _workers(proc.pid)):
+        assert proc.poll() is None and time.monotonic() < deadline
+        time.sleep(0.01)
+    os.kill(kids[0], signal.SIGKILL)
+    code, out, err = finish(proc, 120)
+    assert code == 1, err
+    (lost,) = [t for t in sweep_report(out)["trial_results"] if t.get("lost")]
+    assert lost["failure"] == "worker-died"
+    assert lost["detail"] == "killed by signal 9"
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_a_trial_that_raises_is_a_worker_error_whatever_the_workers(
+    tmp_path: Path, workers: str
+) -> None:
+    # Half the speed limits at the lowest speed override: every trial's plan is refused in
+    # its planning (longer than an hour), after the sweep's checks passed.
+    slow = "[0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18]"
+    robot = robot_with(tmp_path, speed_limits=slow)
+    args = ["--scenario", "pick-place", "--robot", str(robot), "--speed", "0.001"]
+    args += ["--trials", "2", "--workers", workers]
+    code, out, err = finish(cli("sweep", *args, "--json"), 120)
+    assert code == 1, err
+    clean_stderr(err)
+    report = sweep_report(out)
+    assert report["completed"] == 2
+    assert report["failures_by_reason"] == {"worker-error": 2}
+    for trial in report["trial_results"]:
+        assert trial["detail"].startswith("PlanError: the timed plan lasts")
+
+
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_a_varied_control_rate_is_named_as_the_vary_option(command: str) -> None:
+    seed = ["--seed", "1"] if command == "run" else []  # seed 1 draws the second value
+    code, out, err = finish(cli(command, *seed, "--vary", "control_rate=100,123"), 60)
+    assert code == 2
+    (line,) = clean_stderr(err)
+    assert line.startswith("pickplace: error: --vary control_rate=123: control rate 123 Hz")
+    assert "--control-rate" not in line
+    assert out == ""

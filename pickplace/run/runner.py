@@ -411,8 +411,20 @@ def resolve_request(req: RunRequest) -> ResolvedRun:
     # The world's timestep first: the robot is composed and calibrated at it.
     world = read_world(req.scene_path)
     check_timestep(req.scene_path, world.timestep)
-    rate = resolve_control_rate(req.run_control_rate_hz, world.timestep)
+    drawn = req.parameters is not None and req.parameters.get("control_rate") is not None
+    try:
+        rate = resolve_control_rate(req.run_control_rate_hz, world.timestep)
+    except InvalidInputError as exc:
+        if not drawn:
+            raise
+        raise varied_rate_error(req.run_control_rate_hz, exc) from None
     return ResolvedRun(req, scenario, world, resolve_description(req.robot), rate)
+
+
+def varied_rate_error(rate_hz: float, exc: InvalidInputError) -> InvalidInputError:
+    """``exc`` (:func:`resolve_control_rate`'s) about a control rate that ``--vary`` gave:
+    named as that option, not as the control rate's own."""
+    return InvalidInputError(f"--vary control_rate={rate_hz:g}: {exc}")
 
 
 def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, Task]:
@@ -596,4 +608,5 @@ __all__ = [
     "run",
     "valid_control_rates",
     "validate_record_path",
+    "varied_rate_error",
 ]
