@@ -202,7 +202,7 @@ def slip_box(slip_accel: float) -> np.ndarray:
         )
     axis = int(np.argmax(np.abs(GRAVITY_W)))
     v = max(slip_accel / math.sqrt(3.0), 0.5 * (slip_accel + g_abs))
-    half = np.full(3, math.sqrt(max((slip_accel - v) * (slip_accel + v), 0.0) / 2.0))
+    half = np.full(3, math.sqrt(max(slip_accel**2 - v**2, 0.0) / 2.0))
     half[axis] = v
     return half
 
