@@ -106,11 +106,13 @@ def console(*args: str, **kw: Any) -> subprocess.Popen[str]:
 
 
 def wait_for_handlers(proc: subprocess.Popen[str]) -> None:
-    """Until ``proc`` catches SIGHUP: pickplace's handlers are in, its imports just begin."""
+    """Until ``proc`` catches SIGHUP: pickplace's handlers are in, and its imports have only
+    begun (MuJoCo, which takes seconds on a loaded machine, is not loaded yet)."""
     deadline = time.monotonic() + 30
     while not handles(proc.pid, signal.SIGHUP):
         assert proc.poll() is None and time.monotonic() < deadline
         time.sleep(0.002)
+    assert "mujoco" not in Path(f"/proc/{proc.pid}/maps").read_text()
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc")
