@@ -11,8 +11,13 @@ Exit codes (nothing else is ever returned, and no traceback is printed):
   written. One line on stderr; the JSON summary is still printed when stdout works, and an
   older file at the ``--record`` path is left as it was.
 - 128 + N: stopped by signal N, the run's summary says ``interrupted`` and its recording is
-  complete: 130 Ctrl-C (SIGINT), 143 SIGTERM, 129 SIGHUP. 141 (SIGPIPE): stdout's reader went
-  away (``pickplace ... | head``); nothing more is printed.
+  complete: 130 Ctrl-C (SIGINT), 143 SIGTERM, 129 SIGHUP. The first signal decides the code
+  and the message; later ones are ignored while the run finishes, and a signal after the
+  output was written (the process is only exiting) changes nothing. 141 (SIGPIPE): stdout's
+  reader went away before the output was written (``pickplace ... | head``), ``--help`` and
+  ``--version`` included; nothing more is printed. Output that reached the pipe before its
+  reader left was written (exit 0): ``pickplace run --help | true`` gives 0 or 141 depending
+  on which of the two ends first, as for any program.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ from pickplace.robot import DEFAULT_ROBOT  # not .registry: its imports take tim
 from pickplace.signals import Interrupted, InterruptGate, InterruptHandler, signal_name
 
 if TYPE_CHECKING:
+    from _typeshed import SupportsWrite
+
     from pickplace.run.runner import RunRequest
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
@@ -41,12 +48,31 @@ ROBOT_HELP = f"bundled robot (pickplace robots) or robot.toml (default: {DEFAULT
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error as one line and exit code 2."""
+    """argparse that reports a usage error as one line and exit code 2, and a help that
+    cannot be written as any output that cannot (argparse would ignore it: exit 0)."""
 
     def error(self, message: str) -> NoReturn:
         if "expected one argument" in message:
             message += "; a value starting with '-' needs '=', e.g. --brick=-0.1,-0.55,0"
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def print_help(self, file: SupportsWrite[str] | None = None) -> None:
+        if file is not None and file is not sys.stdout:
+            super().print_help(file)
+            return
+        _write_stdout(self.format_help().rstrip("\n"))
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the version on stdout, written as any output (see :class:`_Parser`)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        kwargs.setdefault("help", "show the version and exit")
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> None:
+        _write_stdout(f"pickplace {_version()}")
+        parser.exit()
 
 
 def _int_at_least(minimum: int, what: str) -> Callable[[str], int]:
@@ -99,30 +125,10 @@ def _brick(text: str) -> tuple[float, float, float]:
 
 
 def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+    """The package's version (``pickplace.__version__``, which the installed metadata reads)."""
+    from pickplace import __version__
 
-    try:
-        return version("pickplace")
-    except PackageNotFoundError:
-        return "unknown (not installed)"
-
-
-class _VersionAction(argparse.Action):
-    """``--version``: looks the version up only when asked (importlib.metadata takes time)."""
-
-    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
-        kwargs.setdefault("help", "show the version and exit")
-        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
-
-    def __call__(
-        self,
-        parser: argparse.ArgumentParser,
-        namespace: argparse.Namespace,
-        values: Any,
-        option_string: str | None = None,
-    ) -> None:
-        sys.stdout.write(f"pickplace {_version()}\n")
-        parser.exit()
+    return __version__
 
 
 def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
@@ -143,7 +149,7 @@ def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
         "--speed",
         type=_finite_float,
         default=1.0,
-        help="speed override in (0, 1]: scales every speed limit (accelerations by its square)",
+        help="speed override in [0.001, 1]: scales every speed limit (accelerations by its square)",
     )
     _add_vary(p, vary_help)
 
@@ -219,6 +225,13 @@ def build_parser() -> argparse.ArgumentParser:
         "trials in this process); with --backend ray the local cluster's CPUs, or the tasks in "
         "flight on a cluster at --address (default: its CPUs)",
     )
+    sweep.add_argument(
+        "--trial-timeout",
+        type=_finite_float,
+        metavar="SECONDS",
+        help="time limit of one trial in a worker process (default: 600 s): a worker without "
+        "a result by then (stopped, stuck) is killed and its trial fails with worker-timeout",
+    )
     _add_vary(sweep, "drawn per trial from its seed, recorded per trial in the report")
     sweep.add_argument(
         "--compare",
@@ -230,7 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--speed",
         type=_finite_float,
         default=1.0,
-        help="speed override in (0, 1] for every trial (or --vary speed=...)",
+        help="speed override in [0.001, 1] for every trial (or --vary speed=...)",
     )
     sweep.add_argument(
         "--control-rate",
@@ -571,8 +584,14 @@ def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.run.runner import plan_report, resolve_request
 
     req = _task_request(args)
-    resolved = resolve_request(req)
-    report = plan_report(resolved)
+    stop.arm()  # nothing to finish or keep: a stop signal ends the planning at once
+    try:
+        report = plan_report(resolved := resolve_request(req))
+    except Interrupted:
+        _to_stderr(f"pickplace: stopped by {signal_name(stop.signum or 2)} while planning")
+        return stop.exit_code
+    finally:
+        stop.disarm()
     out = {
         "scenario": req.scenario,
         "robot": resolved.robot.name,
@@ -675,6 +694,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
         backend=args.backend,
         address=args.address,
         robot=args.robot or DEFAULT_ROBOT,
+        trial_timeout_s=args.trial_timeout,
     )
     resolved = req.validate()
     output = None
@@ -722,16 +742,41 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``pickplace`` console script."""
+    """Run the ``pickplace`` command ``argv`` (default: this process's arguments) and return
+    its exit code; the stop-signal handlers are this call's only (the console script is
+    :func:`console`)."""
     stop = InterruptHandler().install()
+    try:
+        return _prepared_main(argv, stop)
+    finally:
+        stop.uninstall()
+
+
+def console(stop: InterruptHandler) -> NoReturn:
+    """Run the command of this process's arguments and exit with its code: the ``pickplace``
+    console script, after ``pickplace.__main__`` installed ``stop`` (before this module's
+    imports, so that a signal during them is noted like one during set-up).
+
+    Once the command has returned, stop signals are ignored until the process is gone: its
+    output is complete and its exit code stands (the default action would kill it in the
+    middle of its exit, e.g. after a JSON line that says success).
+    """
+    try:
+        code = _prepared_main(None, stop)
+    finally:
+        stop.retire()
+    sys.exit(code)
+
+
+def _prepared_main(argv: Sequence[str] | None, stop: InterruptHandler) -> int:
     _ensure_std_streams()
     # Rerun's own log lines (coloured, several per problem) would repeat what the one-line
     # messages here say; RUST_LOG=warn in the environment shows them again.
     os.environ.setdefault("RUST_LOG", "off")
-    try:
-        return _main(argv, stop)
-    finally:
-        stop.uninstall()
+    # Nothing here renders with MuJoCo's OpenGL: without it, importing mujoco starts no child
+    # process (glfw's library probe), which a SIGHUP to the process group broke (a traceback).
+    os.environ.setdefault("MUJOCO_GL", "disable")
+    return _main(argv, stop)
 
 
 def _main(argv: Sequence[str] | None, stop: InterruptHandler) -> int:
@@ -755,7 +800,7 @@ def _main(argv: Sequence[str] | None, stop: InterruptHandler) -> int:
         _print_error(_error_text(exc))
         return EXIT_BAD_INPUT
     except (Interrupted, KeyboardInterrupt):
-        _to_stderr("pickplace: interrupted before the run started")
+        _to_stderr(f"pickplace: stopped by {signal_name(stop.signum or 2)} before the run started")
         return stop.exit_code
     except SystemExit as exc:  # argparse: --help, --version, usage errors
         if exc.code not in (0, None):
@@ -771,5 +816,5 @@ def _main(argv: Sequence[str] | None, stop: InterruptHandler) -> int:
         return EXIT_OK
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # python -m pickplace.cli (python -m pickplace installs it sooner)
+    console(InterruptHandler().install())

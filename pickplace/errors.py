@@ -8,7 +8,11 @@ as a single line.
 from __future__ import annotations
 
 import math
+import os
+import reprlib
+import stat
 from collections.abc import Iterable
+from pathlib import Path
 
 
 class PickPlaceError(Exception):
@@ -29,7 +33,13 @@ class InvalidInputError(PickPlaceError, ValueError):
 
 
 class SceneError(PickPlaceError):
-    """A scene file is missing, is not valid MJCF, or lacks a required element."""
+    """A scene (world) file is missing, is not valid MJCF, or lacks a required element.
+
+    ``field`` is the input it is about: the world file (``RunRequest.scene_path``,
+    ``--scene``).
+    """
+
+    field = "scene_path"
 
 
 class RobotError(PickPlaceError):
@@ -116,3 +126,42 @@ def require_non_negative(
     if v < 0.0:
         raise error(f"{name} must be >= 0, got {value!r}")
     return v
+
+
+_QUOTE = reprlib.Repr()
+_QUOTE.maxlist = _QUOTE.maxtuple = _QUOTE.maxset = 8
+_QUOTE.maxdict = 4
+_QUOTE.maxlevel = 3
+_QUOTE.maxstring = _QUOTE.maxother = 60
+
+
+def quoted(value: object) -> str:
+    """``repr(value)`` shortened for a message: lists cut after 8 items (``...``), strings and
+    numbers after 60 characters, nesting after 3 levels, so that a message quoting a huge or
+    deep input (a 200,000-number list) stays one short line."""
+    return _QUOTE.repr(value)
+
+
+_NOT_A_FILE = {
+    stat.S_IFDIR: "a directory",
+    stat.S_IFIFO: "a FIFO",
+    stat.S_IFCHR: "a character device",
+    stat.S_IFBLK: "a block device",
+    stat.S_IFSOCK: "a socket",
+}
+
+
+def file_problem(path: Path) -> str | None:
+    """None if ``path`` is a regular file (a symbolic link to one counts); else what it is
+    instead, for a message: ``"does not exist"``, ``"is a directory"``, ``"is a FIFO"``, ``"is a
+    character device"`` (``/dev/zero``), ... (never opened: a FIFO or device would block or never
+    end)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "is a symbolic link to a missing file" if os.path.islink(path) else "does not exist"
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    if stat.S_ISREG(mode):
+        return None
+    return f"is {_NOT_A_FILE.get(stat.S_IFMT(mode), 'not a regular file')}"

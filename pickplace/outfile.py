@@ -13,6 +13,15 @@ lock when its process dies, so a killed run never blocks later ones. The lock fi
 while still locked; a writer that locked a lock file which was deleted meanwhile sees that its
 inode is no longer the one at the path and tries again.
 
+The lock file is opened without following a symbolic link (``O_NOFOLLOW``) and used only if it
+is a plain file with no other name (one hard link): a link planted at ``.<name>.lock`` makes the
+open fail (:func:`lock_problem` says why) instead of overwriting the file it points at.
+
+A name so long that the side files' suffixes would pass the file system's limit on a name
+(``NAME_MAX``, 255 bytes) gives them a shortened stem instead: the name's start, ``~`` and 16
+hex digits of its SHA-256 (:func:`side_stem`), so every name the file system accepts can be
+written.
+
 A symbolic link at the target is followed: the file it points at is replaced, the link stays.
 """
 
@@ -21,6 +30,8 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import glob
+import hashlib
 import os
 import secrets
 import stat
@@ -29,6 +40,10 @@ from pathlib import Path
 from pickplace.errors import OutputError
 
 LOCK_ATTEMPTS = 5
+# The longest suffix a side file adds to its stem: ".<pid>-<8 hex>.tmp" with a 10-digit pid
+# (pid_t is 32 bits), longer than ".lock" [bytes].
+SIDE_SUFFIX_BYTES = len(".2147483647-ffffffff.tmp")
+DEFAULT_NAME_MAX = 255  # bytes in a file name, where the file system does not say
 
 
 def resolve_target(path: Path) -> Path:
@@ -36,16 +51,61 @@ def resolve_target(path: Path) -> Path:
     return Path(os.path.realpath(path)) if path.is_symlink() else path
 
 
+def name_max(folder: Path) -> int:
+    """The longest file name [bytes] the file system of ``folder`` accepts (255 if unknown)."""
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        return DEFAULT_NAME_MAX
+
+
+def side_stem(target: Path) -> str:
+    """The stem of ``target``'s side files (lock, temporary files): ``.<name>``, or when that
+    leaves too little room for their suffixes under :func:`name_max`, ``.<start>~<digest>``
+    (the name's first characters and 16 hex digits of its SHA-256)."""
+    name = target.name
+    room = name_max(target.parent) - SIDE_SUFFIX_BYTES
+    if len(os.fsencode(f".{name}")) <= room:
+        return f".{name}"
+    digest = hashlib.sha256(os.fsencode(name)).hexdigest()[:16]
+    start = name
+    while start and len(os.fsencode(f".{start}~{digest}")) > room:
+        start = start[:-1]
+    return f".{start}~{digest}"
+
+
 def lock_path(target: Path) -> Path:
-    """Lock file of ``target``: ``.<name>.lock`` in the same folder."""
-    return target.with_name(f".{target.name}.lock")
+    """Lock file of ``target``: ``.<name>.lock`` in the same folder (see :func:`side_stem`)."""
+    return target.with_name(f"{side_stem(target)}.lock")
+
+
+def lock_problem(lock: Path) -> str | None:
+    """Why ``lock`` cannot serve as a lock file (a symbolic link, not a plain file, or a file
+    with other names), or None if it is absent or usable. Nothing is opened."""
+    try:
+        st = os.lstat(lock)
+    except OSError:
+        return None
+    if stat.S_ISLNK(st.st_mode):
+        return f"its lock file '{lock}' is a symbolic link; remove the link"
+    if not stat.S_ISREG(st.st_mode):
+        return f"its lock file '{lock}' is not a plain file; remove it"
+    if st.st_nlink > 1:
+        return f"its lock file '{lock}' has other names (hard links); remove it"
+    return None
 
 
 def _pid_in(lock: Path) -> str:
     try:
-        text = lock.read_text().strip()
+        fd = os.open(lock, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
         return ""
+    try:
+        text = os.read(fd, 32).decode(errors="replace").strip()
+    except OSError:
+        return ""
+    finally:
+        os.close(fd)
     return f" (pid {text})" if text.isdigit() else ""
 
 
@@ -83,10 +143,9 @@ class OutputFile:
                 mode = stat.S_IMODE(self.target.stat().st_mode)
             except OSError:
                 mode = 0o666 & ~_umask()
+            stem = side_stem(self.target)
             for _ in range(LOCK_ATTEMPTS):
-                temp = self.target.with_name(
-                    f".{self.target.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp"
-                )
+                temp = self.target.with_name(f"{stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
                 try:
                     fd = os.open(temp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
                 except FileExistsError:
@@ -110,12 +169,16 @@ class OutputFile:
     def _lock(self) -> None:
         lock = lock_path(self.target)
         for _ in range(LOCK_ATTEMPTS):
-            try:
-                fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o644)
+            try:  # never through a link: a planted one would have its target truncated
+                fd = os.open(lock, os.O_CREAT | os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
             except OSError as exc:
-                raise OutputError(
-                    f"cannot lock '{self.path}' for writing ({lock}: {exc.strerror})"
-                ) from None
+                why = lock_problem(lock) or f"{lock}: {exc.strerror}"
+                raise OutputError(f"cannot lock '{self.path}' for writing: {why}") from None
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+                os.close(fd)
+                why = lock_problem(lock) or f"its lock file '{lock}' changed"
+                raise OutputError(f"cannot lock '{self.path}' for writing: {why}")
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as exc:
@@ -151,7 +214,7 @@ class OutputFile:
     def _delete_stale_temps(self) -> None:
         """Temporary files of this path left by killed runs (we hold the lock: none is live)."""
         folder = self.target.parent
-        for stale in folder.glob(f".{self.target.name}.*.tmp"):
+        for stale in folder.glob(f"{glob.escape(side_stem(self.target))}.*.tmp"):
             with contextlib.suppress(OSError):
                 stale.unlink()
 
@@ -218,4 +281,4 @@ def _fsync_folder(folder: Path) -> None:
         os.close(fd)
 
 
-__all__ = ["OutputFile", "lock_path", "resolve_target"]
+__all__ = ["OutputFile", "lock_path", "lock_problem", "name_max", "resolve_target", "side_stem"]

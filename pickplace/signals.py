@@ -14,6 +14,11 @@ handled:
   the middle: a signal there is delivered when the block ends.
 - Only the first signal is delivered; later ones are noted and ignored while the run finishes
   (which is bounded: see ``pickplace.record.recording``).
+- Long set-up work (planning: candidates, pre-flights) calls :func:`stop_point` as it goes. A
+  signal noted before the run is armed is kept for the run's first block, unless the work is
+  still going :data:`SETUP_STOP_WAIT_S` after both the signal and its own first stop point:
+  then the stop point raises it. A set-up of normal length is never cut (the run still ends
+  with a summary); a long planning stops within about that time of the signal.
 
 The exit code of a stopped process is ``128 + signal number``: 130 for SIGINT, 143 for
 SIGTERM, 129 for SIGHUP. Without an installed handler (library use) nothing changes: Python
@@ -23,6 +28,7 @@ raises KeyboardInterrupt on SIGINT anywhere, as usual.
 from __future__ import annotations
 
 import signal
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
@@ -31,6 +37,11 @@ from typing import Any
 STOP_SIGNALS: tuple[signal.Signals, ...] = tuple(
     getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
 )
+
+# How long a stop request noted before the run starts waits for it, once set-up work that
+# checks for it (planning) has gone on as long [s]: far more than a normal planning takes
+# (0.1–1 s), and well within the 2 s a stop may take.
+SETUP_STOP_WAIT_S = 1.0
 
 _active: InterruptHandler | None = None
 
@@ -64,6 +75,8 @@ class InterruptHandler:
 
     def __init__(self) -> None:
         self.signum: int | None = None
+        self._noted_at: float | None = None  # time.monotonic() of the first signal [s]
+        self._work_since: float | None = None  # of the first stop point [s]
         self._armed = False
         self._delivered = False
         self._depth = 0
@@ -84,6 +97,17 @@ class InterruptHandler:
         global _active
         for sig, previous in self._previous.items():
             signal.signal(sig, previous)
+        self._previous.clear()
+        if _active is self:
+            _active = None
+
+    def retire(self) -> None:
+        """Ignore the stop signals from now on, in place of this handler: for a process whose
+        work is done and that only exits (restoring the default action would let a late
+        signal kill it in the middle of its exit, after its output said how it ended)."""
+        global _active
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
         self._previous.clear()
         if _active is self:
             _active = None
@@ -121,11 +145,28 @@ class InterruptHandler:
         self._depth -= 1
         self._deliver_pending()
 
+    def stop_point(self) -> None:
+        """A point where long set-up work may be cut short (see the module docstring).
+
+        Raises:
+            Interrupted: A stop request has waited :data:`SETUP_STOP_WAIT_S` since both it
+                arrived and the first stop point; it counts as delivered.
+        """
+        now = time.monotonic()
+        if self._work_since is None:
+            self._work_since = now
+        if self._armed or self._delivered or self.signum is None or self._noted_at is None:
+            return
+        if now - max(self._noted_at, self._work_since) >= SETUP_STOP_WAIT_S:
+            self._delivered = True
+            raise Interrupted(self.signum)
+
     # ------------------------------------------------------------------ internals
 
     def _on_signal(self, signum: int, frame: FrameType | None) -> None:
         if self.signum is None:
             self.signum = signum
+            self._noted_at = time.monotonic()
         self._deliver_pending()
 
     def _deliver_pending(self) -> None:
@@ -147,6 +188,13 @@ def deferred_interrupts() -> Iterator[None]:
     else:
         with _active.deferred():
             yield
+
+
+def stop_point() -> None:
+    """:meth:`InterruptHandler.stop_point` of the installed handler; a no-op without one
+    (library use, sweep workers)."""
+    if _active is not None:
+        _active.stop_point()
 
 
 def ignore_in_child() -> None:
@@ -182,6 +230,7 @@ class InterruptGate:
 
 
 __all__ = [
+    "SETUP_STOP_WAIT_S",
     "STOP_SIGNALS",
     "InterruptGate",
     "InterruptHandler",
@@ -190,4 +239,5 @@ __all__ = [
     "deferred_interrupts",
     "ignore_in_child",
     "signal_name",
+    "stop_point",
 ]

@@ -22,7 +22,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("record",),
     ("run",),
     ("sweep",),
-    ("cli",),
+    ("cli", "__main__"),
 )
 """Bottom to top: a module may import from its own layer's packages and from the layers below.
 
@@ -30,7 +30,8 @@ The bottom layer holds plain modules (errors, geometry, files, signals); each la
 package: the robot (description → composed, calibrated robot), the world (scene, placements),
 control (differential IK), planning (grasps → timed, pre-flighted plan), sim (the loop and its
 judging, scenarios, loader), record (Rerun), run (one request end to end), sweep (many trials),
-and the CLI on top."""
+and the CLI on top, with the console script's entry (``__main__``: signal handlers, then the
+CLI)."""
 
 LAYER_OF = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
 

@@ -288,7 +288,9 @@ def test_ctrl_c_works_while_the_viewer_is_frozen(tmp_path: Path, viewer: Viewer)
     took = time.monotonic() - t0
     code, out, err = finish(proc, 60)
     assert code == 130
-    assert took < 3.0, took  # the relay gets 1 s after an interrupt, then is killed
+    assert took < 4.0, (
+        took
+    )  # the relay gets 1 s after an interrupt, then is killed; 3 s margin for a loaded machine
     clean_stderr(err)
     summary = one_json(summary_line + out)
     assert summary["failure"] == "interrupted"

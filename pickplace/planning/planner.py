@@ -61,6 +61,7 @@ from pickplace.planning.plan import (
 )
 from pickplace.planning.preflight import Preflight, PreflightConfig, PreflightResult, Problem
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
+from pickplace.signals import stop_point
 from pickplace.world.scene import Scene
 
 # Clearance of the via-point above the higher bin wall: brick height hanging below the tool
@@ -334,6 +335,7 @@ class PickPlacePlanner:
         for r in ranked[:MAX_PREFLIGHTS]:
             if r.problem is not None:
                 break
+            stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
             plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, r.grasp)
             tried.append(Candidate(r.grasp.label, plan, result, warning))
             if result.feasible and chosen is None:

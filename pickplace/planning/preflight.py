@@ -34,8 +34,9 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace.control.controllers import IKResult, IKStatus, make_controller
-from pickplace.errors import require_positive
+from pickplace.errors import PlanError, require_positive
 from pickplace.planning.plan import Plan, grasp_width
+from pickplace.signals import stop_point
 from pickplace.world.scene import Scene
 
 # Contact bits of the kinematic copy: the robot touches the world, the brick touches the
@@ -43,6 +44,13 @@ from pickplace.world.scene import Scene
 _WORLD_CONTYPE, _WORLD_CONAFFINITY = 1, 1 | 2
 _ROBOT_CONTYPE, _ROBOT_CONAFFINITY = 2, 0
 _BRICK_CONTYPE, _BRICK_CONAFFINITY = 4, 1
+# A brick geom within this distance of a world geom rests on it [m].
+_SUPPORT_DISTANCE = 1e-3
+# The longest plan [s] a pre-flight takes: an hour of simulated time. A pre-flight keeps
+# (8 n + 2) numbers per tick for n joints (0.46 kB for 7), 72,000 ticks at 20 Hz: 33 MB.
+MAX_PLAN_DURATION_S = 3600.0
+# A stop request is looked for every this many pre-flight ticks (a few ms of work).
+_STOP_POINT_TICKS = 16
 
 
 @dataclass(frozen=True)
@@ -211,6 +219,7 @@ class Preflight:
         X_WO_end = X_WO_goal if X_WO_goal is not None else X_WO_start
         pair_kind = self._pair_kinds(X_WO_start, X_WO_end)
         command, sample = self.controller.command, traj.sample
+        check_plan_duration(traj.end_time)
         n = math.floor(traj.end_time / dt + 1e-9) + 1
         times = np.arange(n) * dt
         nq = len(sc.robot.q_home)
@@ -223,6 +232,8 @@ class Preflight:
         end = n
         half_dt = 0.5 * dt
         for i in range(n):
+            if i % _STOP_POINT_TICKS == 0:
+                stop_point()
             t = float(times[i])
             x, V, width = sample(t)
             if midpoint:  # the plan's velocity at the middle of the tick
@@ -427,6 +438,23 @@ class Preflight:
             sc.geom_name(a),
             sc.geom_name(b),
             (float(pos[0]), float(pos[1]), float(pos[2])),
+        )
+
+
+def check_plan_duration(duration: float) -> None:
+    """Refuse a plan longer than :data:`MAX_PLAN_DURATION_S` before it is pre-flighted.
+
+    Args:
+        duration: The plan's end time [s].
+
+    Raises:
+        PlanError: It is longer (or not finite); the message says what makes plans long.
+    """
+    if not duration <= MAX_PLAN_DURATION_S:
+        raise PlanError(
+            f"the timed plan lasts {duration:.4g} s; valid: at most {MAX_PLAN_DURATION_S:g} s "
+            "of simulated time (what a pre-flight and a run keep in memory grows with it): "
+            "raise the speed override (--speed) or the robot's speed_limits and accel_limits"
         )
 
 

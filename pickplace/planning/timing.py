@@ -39,6 +39,10 @@ from pickplace.planning.plan import Phases, Plan
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory
 
 GRAVITY_W = np.array([0.0, 0.0, -9.81])
+# The speed override's range [-]: every motion takes about 1 / speed as long, so at the lower
+# end the default robot's plan lasts close to an hour of simulated time, the most a plan may
+# (pickplace.planning.preflight.MAX_PLAN_DURATION_S).
+SPEED_RANGE = (1e-3, 1.0)
 # Speeds below this count as zero when timing a grid interval [1/s].
 _TINY = 1e-12
 
@@ -384,8 +388,10 @@ class TimingConfig:
     default_accel_time: float = 0.25
 
     def __post_init__(self) -> None:
-        """Validate: ``speed`` in (0, 1], ``speed_margin`` in (0, 1], the rest > 0."""
-        for name in ("speed", "speed_margin"):
+        """Validate: ``speed`` in :data:`SPEED_RANGE`, ``speed_margin`` in (0, 1], the rest
+        > 0."""
+        check_speed(self.speed)
+        for name in ("speed_margin",):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and 0.0 < v <= 1.0):
                 raise InvalidInputError(
@@ -422,6 +428,22 @@ class TimingConfig:
             tool_angular_accel=scaled(self.tool_angular_accel, 2),
             slip_accel=None if slip_accel is None else slip_accel / self.slip_safety_factor,
         )
+
+
+def check_speed(speed: object) -> float:
+    """Return the speed override ``speed`` as float if it lies in :data:`SPEED_RANGE`.
+
+    Raises:
+        InvalidInputError: It does not (field ``speed``).
+    """
+    lo, hi = SPEED_RANGE
+    if not (isinstance(speed, int | float) and not isinstance(speed, bool) and lo <= speed <= hi):
+        raise InvalidInputError(
+            f"speed must be a number in [{lo:g}, {hi:g}] (a fraction of the robot's speed "
+            f"limits; below {lo:g} a plan lasts hours), got {speed!r}",
+            field="speed",
+        )
+    return float(speed)
 
 
 def retime(

@@ -31,8 +31,13 @@ pipeline needs is read from the files or measured in simulation (``pickplace.rob
     couple_fingers = true                     # couple independent fingers (default true)
 
 Every bad field raises :class:`~pickplace.errors.RobotError` with one line naming the file, the
-field and what would be valid. Lengths that depend on the arm (one speed limit per arm joint)
-are checked when the robot is composed (``pickplace.robot.compose``), with the same kind of message.
+field and what would be valid (a long or deep value is quoted shortened). Lengths that depend
+on the arm (one speed limit, acceleration limit and home value per arm joint) are checked when
+the robot is composed (``pickplace.robot.compose``), with the same kind of message.
+
+Numbers must lie in physical ranges (:data:`SPEED_LIMIT_RANGE`, :data:`ACCEL_LIMIT_RANGE`,
+:data:`GRIP_FORCE_RANGE`, :data:`MOUNT_DISTANCE_MAX`): beyond them a value is a unit or typing
+error, and the planner's arithmetic (squares of speeds, friction budgets) would overflow.
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pickplace.errors import RobotError
+from pickplace.errors import RobotError, file_problem, quoted
 from pickplace.robot.mjcf import file_stamps
 
 if sys.version_info >= (3, 11):
@@ -85,6 +90,22 @@ _GRIPPER_KEYS = (
 )
 _TCP_KEYS = ("pos", "quat")
 
+SPEED_LIMIT_RANGE = (1e-2, 1e2)
+"""Joint speed limits [rad/s] (m/s for a slide joint): the fastest arms' joints turn at about
+10 rad/s, direct drives at 30; below 0.01 rad/s a radian takes minutes."""
+ACCEL_LIMIT_RANGE = (1e-2, 1e4)
+"""Joint acceleration limits [rad/s²] (m/s²): arms reach 1–500 rad/s²."""
+GRIP_FORCE_RANGE = (0.1, 1e4)
+"""A gripper's squeeze per jaw [N]: from a small electric gripper's 1 N to a large pneumatic
+one's 5 kN."""
+MOUNT_DISTANCE_MAX = 1.0
+"""Largest offset of the gripper from the flange, and of the tool point from the gripper, per
+axis [m]: more is a unit error (millimetres given as metres)."""
+HOME_MAX = 100.0
+"""Largest magnitude of a home joint position [rad] (or [m]): 16 turns."""
+MAX_DESCRIPTION_BYTES = 1 << 20
+"""Largest description file [bytes]: a description is a few hundred bytes."""
+
 
 def _fail(source: Path, field_name: str, problem: str) -> RobotError:
     return RobotError(f"{source}: {field_name}: {problem}")
@@ -95,20 +116,39 @@ def _is_number(value: object) -> bool:
 
 
 def _numbers(
-    source: Path, field_name: str, value: object, length: int | None = None, what: str = ""
+    source: Path,
+    field_name: str,
+    value: object,
+    length: int | None = None,
+    what: str = "",
+    bounds: tuple[float, float] | None = None,
 ) -> tuple[float, ...]:
-    """A list of finite numbers (of ``length`` if given)."""
+    """A list of finite numbers (of ``length`` if given, each in ``bounds`` if given, in the
+    unit ``what``)."""
     shape = f"a list of {length} numbers" if length is not None else "a list of numbers"
     unit = f" {what}" if what else ""
     if not isinstance(value, list) or not all(_is_number(v) for v in value):
-        raise _fail(source, field_name, f"must be {shape}{unit}, got {value!r}")
+        raise _fail(source, field_name, f"must be {shape}{unit}, got {quoted(value)}")
     numbers = tuple(float(v) for v in value)
     if not all(math.isfinite(v) for v in numbers):
-        raise _fail(source, field_name, f"must be {shape}{unit}, all finite, got {value!r}")
+        raise _fail(source, field_name, f"must be {shape}{unit}, all finite, got {quoted(value)}")
     if length is not None and len(numbers) != length:
-        raise _fail(source, field_name, f"must be {shape}{unit}, got {len(numbers)}: {value!r}")
+        raise _fail(
+            source, field_name, f"must be {shape}{unit}, got {len(numbers)}: {quoted(value)}"
+        )
     if not numbers:
         raise _fail(source, field_name, f"must be a non-empty list of numbers{unit}, got []")
+    if bounds is not None:
+        lo, hi = bounds
+        for i, v in enumerate(numbers):
+            if not lo <= v <= hi:
+                raise _fail(
+                    source,
+                    field_name,
+                    f"value {i + 1} of {len(numbers)} is {v:g}"
+                    f"{', not > 0' if v <= 0 < lo else ''}; valid: numbers in "
+                    f"[{lo:g}, {hi:g}]{unit}",
+                )
     return numbers
 
 
@@ -125,20 +165,23 @@ def _angle(source: Path, field_name: str, value: object) -> str | None:
     if value is None:
         return None
     if value not in ANGLE_UNITS:
-        raise _fail(source, field_name, f"must be one of {', '.join(ANGLE_UNITS)}, got {value!r}")
+        raise _fail(
+            source, field_name, f"must be one of {', '.join(ANGLE_UNITS)}, got {quoted(value)}"
+        )
     return str(value)
 
 
 def _mjcf_path(source: Path, field_name: str, value: object) -> Path:
     if not isinstance(value, str) or not value:
-        raise _fail(source, field_name, f"must be a path to an MJCF file, got {value!r}")
+        raise _fail(source, field_name, f"must be a path to an MJCF file, got {quoted(value)}")
     path = Path(value)
     path = (source.parent / path).resolve() if not path.is_absolute() else path
-    if not path.is_file():
+    problem = file_problem(path)
+    if problem is not None:
         raise _fail(
             source,
             field_name,
-            f"file '{path}' does not exist; valid: an MJCF file path relative to '{source.parent}'",
+            f"'{path}' {problem}; valid: an MJCF file path relative to '{source.parent}'",
         )
     return path
 
@@ -167,7 +210,7 @@ def _check_per_joint(
     if len(values) != len(joints):
         raise _fail(source, field_name, f"has {len(values)} values; valid: {valid}")
     if positive and any(v <= 0 for v in values):
-        raise _fail(source, field_name, f"{list(values)} is not all > 0; valid: {valid}")
+        raise _fail(source, field_name, f"{quoted(list(values))} is not all > 0; valid: {valid}")
 
 
 def check_per_joint(
@@ -291,16 +334,28 @@ class RobotDescription:
 
     @classmethod
     def _read(cls, source: Path) -> RobotDescription:
-        if not source.is_file():
+        problem = file_problem(source)
+        if problem is not None:
             raise RobotError(
-                f"{source}: robot description does not exist; valid: a TOML file with "
+                f"{source}: robot description {problem}; valid: a TOML file with "
                 f"name, [arm] and [gripper] (see docs/robots.md)"
+            )
+        size = source.stat().st_size
+        if size > MAX_DESCRIPTION_BYTES:
+            raise RobotError(
+                f"{source}: robot description is {size} bytes; valid: at most "
+                f"{MAX_DESCRIPTION_BYTES} bytes (a description is a few hundred)"
             )
         try:
             table = tomllib.loads(source.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             detail = " ".join(str(exc).split())
-            raise RobotError(f"{source}: not valid TOML: {detail}") from exc
+            raise RobotError(f"{source}: not valid TOML: {quoted(detail)}") from exc
+        except RecursionError:  # the parser recurses into nested arrays and tables
+            raise RobotError(
+                f"{source}: not valid TOML here: arrays or tables nested thousands deep; "
+                "valid: a description's few levels (see docs/robots.md)"
+            ) from None
         return cls.from_mapping(table, source)
 
     @classmethod
@@ -313,7 +368,7 @@ class RobotDescription:
                 source,
                 "name",
                 f"must be letters, digits, '.', '_' or '-' (not starting with a symbol), "
-                f"got {name!r}",
+                f"got {quoted(name)}",
             )
         for section in ("arm", "gripper"):
             if not isinstance(table.get(section), dict):
@@ -333,32 +388,22 @@ def _parse_arm(source: Path, t: Mapping[str, Any]) -> ArmDescription:
             raise _fail(source, f"[arm] {key}", "missing (required)")
     flange = t.get("flange")
     if flange is not None and (not isinstance(flange, str) or not flange):
-        raise _fail(source, "[arm] flange", f"must be a body or site name, got {flange!r}")
-    speed = _numbers(source, "[arm] speed_limits", t["speed_limits"], what="[rad/s]")
-    if any(v <= 0 for v in speed):
-        raise _fail(
-            source, "[arm] speed_limits", f"{list(speed)} is not all > 0; valid: positive [rad/s]"
-        )
+        raise _fail(source, "[arm] flange", f"must be a body or site name, got {quoted(flange)}")
+    speed = _numbers(
+        source, "[arm] speed_limits", t["speed_limits"], what="[rad/s]", bounds=SPEED_LIMIT_RANGE
+    )
     accel = None
-    if "accel_limits" in t:
-        accel = _numbers(source, "[arm] accel_limits", t["accel_limits"], what="[rad/s²]")
-        if len(accel) != len(speed) or any(v <= 0 for v in accel):
-            raise _fail(
-                source,
-                "[arm] accel_limits",
-                f"{list(accel)}; valid: {len(speed)} positive numbers [rad/s²], one per "
-                f"speed limit",
-            )
+    if "accel_limits" in t:  # one per arm joint, like the speed limits: checked at composing
+        accel = _numbers(
+            source,
+            "[arm] accel_limits",
+            t["accel_limits"],
+            what="[rad/s²]",
+            bounds=ACCEL_LIMIT_RANGE,
+        )
     home = None
     if "home" in t:
-        home = _numbers(source, "[arm] home", t["home"], what="[rad]")
-        if len(home) != len(speed):
-            raise _fail(
-                source,
-                "[arm] home",
-                f"has {len(home)} values; valid: {len(speed)} joint positions [rad], one per "
-                f"speed limit",
-            )
+        home = _numbers(source, "[arm] home", t["home"], what="[rad]", bounds=(-HOME_MAX, HOME_MAX))
     return ArmDescription(
         mjcf=_mjcf_path(source, "[arm] mjcf", t["mjcf"]),
         flange=flange,
@@ -375,13 +420,16 @@ def _unit_quat(source: Path, field_name: str, value: object) -> tuple[float, flo
     q = _numbers(source, field_name, value, 4, "(wxyz)")
     norm = math.sqrt(sum(v * v for v in q))
     if norm < 1e-9:
-        raise _fail(source, field_name, f"must be a non-zero quaternion (wxyz), got {value!r}")
+        raise _fail(
+            source, field_name, f"must be a non-zero quaternion (wxyz), got {quoted(value)}"
+        )
     w, x, y, z = (v / norm for v in q)
     return (w, x, y, z)
 
 
 def _vec3(source: Path, field_name: str, value: object) -> tuple[float, float, float]:
-    x, y, z = _numbers(source, field_name, value, 3, "[m]")
+    bound = (-MOUNT_DISTANCE_MAX, MOUNT_DISTANCE_MAX)
+    x, y, z = _numbers(source, field_name, value, 3, "[m]", bounds=bound)
     return (x, y, z)
 
 
@@ -399,7 +447,7 @@ def _parse_gripper(source: Path, t: Mapping[str, Any]) -> GripperDescription:
             or not all(isinstance(side, list) and side for side in value)
             or not all(isinstance(n, str) and n for side in value for n in side)
         ):
-            raise _fail(source, "[gripper] pads", f"got {value!r}; valid: {valid}")
+            raise _fail(source, "[gripper] pads", f"got {quoted(value)}; valid: {valid}")
         pads = (tuple(value[0]), tuple(value[1]))
     tcp = None
     if "tcp" in t:
@@ -416,20 +464,28 @@ def _parse_gripper(source: Path, t: Mapping[str, Any]) -> GripperDescription:
             raise _fail(
                 source,
                 "[gripper] tcp",
-                f"got {value!r}; valid: a site name or {{ pos = [x, y, z], quat = [w, x, y, z] }}",
+                f"got {quoted(value)}; valid: a site name or "
+                "{ pos = [x, y, z], quat = [w, x, y, z] }",
             )
     commands: dict[str, tuple[float, ...] | None] = {}
     for key in ("open_command", "closed_command"):
         commands[key] = _numbers(source, f"[gripper] {key}", t[key]) if key in t else None
     forces: dict[str, float | None] = {}
+    lo, hi = GRIP_FORCE_RANGE
     for key in ("grip_force", "squeeze_force"):
         value = t.get(key)
-        if value is not None and (not _is_number(value) or not math.isfinite(value) or value <= 0):
-            raise _fail(source, f"[gripper] {key}", f"must be a positive number [N], got {value!r}")
+        if value is not None and (not _is_number(value) or not lo <= value <= hi):
+            raise _fail(
+                source,
+                f"[gripper] {key}",
+                f"is {quoted(value)}; valid: a number in [{lo:g}, {hi:g}] [N] (squeeze per jaw)",
+            )
         forces[key] = None if value is None else float(value)
     couple = t.get("couple_fingers", True)
     if not isinstance(couple, bool):
-        raise _fail(source, "[gripper] couple_fingers", f"must be true or false, got {couple!r}")
+        raise _fail(
+            source, "[gripper] couple_fingers", f"must be true or false, got {quoted(couple)}"
+        )
     return GripperDescription(
         mjcf=_mjcf_path(source, "[gripper] mjcf", t["mjcf"]),
         mount_pos=_vec3(source, "[gripper] mount_pos", t.get("mount_pos", [0.0, 0.0, 0.0])),

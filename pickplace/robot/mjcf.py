@@ -18,18 +18,27 @@ into a composed scene they meet these pitfalls (``docs/physics-notes.md``):
 
 Every repair is reported in :attr:`Part.repairs`. What cannot be repaired raises
 :class:`~pickplace.errors.RobotError` naming the file and the element.
+
+Reading is bounded whatever the file (all limits in the message that refuses a file): each
+file at most :data:`MAX_MJCF_BYTES`, a file and its includes together at most
+:data:`MAX_MJCF_ELEMENTS` elements (counted while parsing, so a huge file stops early),
+includes nested at most :data:`MAX_INCLUDE_DEPTH` deep, and a file that includes itself
+(directly or through others) is refused at once with the chain of files.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import re
+import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pickplace.errors import RobotError, SceneError
+from pickplace.errors import RobotError, SceneError, file_problem
 
 if TYPE_CHECKING:
     import mujoco
@@ -54,6 +63,23 @@ _UNRECOGNIZED = re.compile(r"unrecognized attribute: '([^']+)'.*?Element '([^']+
 _OPENING = re.compile(r"Error opening file '([^']+)'")
 _ELEMENT = re.compile(r"Element name '([^']+)'")
 _MAX_REPAIRS = 50
+
+MAX_MJCF_BYTES = 16 << 20
+"""Largest arm or gripper file, and included file [bytes]: published robot files are around
+10 kB; this leaves room for mesh data written inline."""
+MAX_MJCF_ELEMENTS = 20_000
+"""Most XML elements in a file with its includes: published arms and grippers have 50–200,
+whole humanoids a few thousand."""
+MAX_INCLUDE_DEPTH = 8
+"""Deepest nesting of ``<include>`` files (published robots use one level, if any)."""
+
+
+@dataclass
+class _Reading:
+    """What reading one part has taken so far: the files read, the elements parsed."""
+
+    files: list[Path]
+    elements: int = 0
 
 
 @dataclass(frozen=True)
@@ -85,55 +111,90 @@ class Part:
         return RobotError(f"{self.path}: {self.field}: {problem}")
 
 
-def _read_xml(path: Path, source: Path, field: str) -> ET.Element:
+def _read_xml(path: Path, source: Path, field: str, reading: _Reading) -> ET.Element:
+    """Parse ``path`` (size, element count and root checked); its elements count in
+    ``reading``."""
+    problem = file_problem(path)
+    if problem is not None:
+        raise RobotError(f"{source}: {field}: '{path}' {problem}; valid: an MJCF file")
+    size = path.stat().st_size
+    if size > MAX_MJCF_BYTES:
+        raise RobotError(
+            f"{source}: {field}: '{path}' is {size} bytes; valid: an MJCF file of at most "
+            f"{MAX_MJCF_BYTES} bytes"
+        )
+    root: ET.Element | None = None
     try:
-        root = ET.parse(path).getroot()
+        for _, element in ET.iterparse(path, events=("start",)):
+            if root is None:
+                root = element
+            reading.elements += 1
+            if reading.elements > MAX_MJCF_ELEMENTS:
+                raise RobotError(
+                    f"{source}: {field}: '{path}' (with the files it includes) has more than "
+                    f"{MAX_MJCF_ELEMENTS} XML elements; valid: at most {MAX_MJCF_ELEMENTS} (a "
+                    "robot has a few hundred)"
+                )
     except (OSError, ET.ParseError) as exc:
-        detail = " ".join(str(exc).split())
+        detail = " ".join(str(exc).split())[:300]
         raise RobotError(
             f"{source}: {field}: '{path}' is not readable XML: {detail}; valid: an MJCF file"
         ) from exc
-    if root.tag != "mujoco":
-        raise RobotError(
-            f"{source}: {field}: '{path}' has root element <{root.tag}>; valid: <mujoco>"
-        )
+    if root is None or root.tag != "mujoco":
+        tag = "none" if root is None else f"<{root.tag[:60]}>"
+        raise RobotError(f"{source}: {field}: '{path}' has root element {tag}; valid: <mujoco>")
     return root
 
 
 def _inline_includes(
-    root: ET.Element, base: Path, source: Path, field: str, files: list[Path]
+    root: ET.Element,
+    base: Path,
+    source: Path,
+    field: str,
+    reading: _Reading,
+    chain: tuple[Path, ...],
 ) -> None:
-    """Replace every ``<include file>`` by the children of the included ``<mujoco>``.
+    """Replace every ``<include file>`` by the children of the included ``<mujoco>``, its own
+    includes first (depth first, at most :data:`MAX_INCLUDE_DEPTH` deep).
 
-    Paths are relative to the main file's folder, as MuJoCo resolves them.
+    Paths are relative to the main file's folder, as MuJoCo resolves them. ``chain`` is the
+    files being included, the main file first: one of them again is a cycle.
     """
-    for _ in range(1000):
-        parents = {child: parent for parent in root.iter() for child in parent}
-        include = next((e for e in root.iter("include")), None)
-        if include is None:
-            return
-        name = include.get("file")
-        if not name:
-            raise RobotError(
-                f"{source}: {field}: <include> without a file attribute; valid: "
-                f'<include file="..."/>'
-            )
-        path = Path(name) if Path(name).is_absolute() else base / name
-        if not path.is_file():
-            raise RobotError(
-                f"{source}: {field}: <include file=\"{name}\"> not found at '{path}'; valid: a "
-                f"path relative to '{base}'"
-            )
-        files.append(path)
-        included = _read_xml(path, source, field)
-        parent = parents[include]
-        at = list(parent).index(include)
-        parent.remove(include)
-        for k, child in enumerate(list(included)):
-            parent.insert(at + k, child)
-    raise RobotError(
-        f"{source}: {field}: <include> files include each other without end; valid: no cycles"
-    )
+    for parent in list(root.iter()):  # the elements of this file, not of what is inlined
+        for include in [child for child in parent if child.tag == "include"]:
+            name = include.get("file")
+            if not name:
+                raise RobotError(
+                    f"{source}: {field}: <include> without a file attribute; valid: "
+                    f'<include file="..."/>'
+                )
+            path = Path(name) if Path(name).is_absolute() else base / name
+            resolved = path.resolve()
+            if resolved in chain:
+                cycle = " -> ".join(f"'{f.name}'" for f in (*chain, resolved))
+                raise RobotError(
+                    f'{source}: {field}: <include file="{name}"> includes itself ({cycle}); '
+                    "valid: includes without cycles"
+                )
+            if len(chain) > MAX_INCLUDE_DEPTH:
+                raise RobotError(
+                    f'{source}: {field}: <include file="{name}"> is nested more than '
+                    f"{MAX_INCLUDE_DEPTH} deep; valid: at most {MAX_INCLUDE_DEPTH} levels"
+                )
+            problem = file_problem(path)
+            if problem is not None:
+                what = "not found" if problem == "does not exist" else problem
+                raise RobotError(
+                    f"{source}: {field}: <include file=\"{name}\">: '{path}' {what}; valid: "
+                    f"an MJCF file, its path relative to '{base}'"
+                )
+            reading.files.append(path)
+            included = _read_xml(path, source, field, reading)
+            _inline_includes(included, base, source, field, reading, (*chain, resolved))
+            at = list(parent).index(include)
+            parent.remove(include)
+            for k, child in enumerate(list(included)):
+                parent.insert(at + k, child)
 
 
 def _asset_dirs(root: ET.Element, base: Path) -> tuple[Path, Path, bool]:
@@ -176,9 +237,10 @@ def _resolve_assets(
             rel = Path(Path(name).name if strip else name)
             path = rel if rel.is_absolute() else (folder / rel).resolve()
             what = f"{element.tag} '{element.get('name', rel.stem)}'"
-            if not path.is_file():
+            problem = file_problem(path)
+            if problem is not None:
                 raise RobotError(
-                    f"{source}: {field}: {what} does not load: file '{path}' does not exist; "
+                    f"{source}: {field}: {what} does not load: file '{path}' {problem}; "
                     f"valid: a path relative to the MJCF file's folder (or its compiler's "
                     f"meshdir/texturedir/assetdir)"
                 )
@@ -318,12 +380,11 @@ def _sanitised_tree(
 ) -> tuple[ET.Element, list[Path], str, list[str]]:
     """The file read, its includes inlined, its angle set, scene parts stripped and asset paths
     made absolute: the tree, every file it depends on, the angle used and the repairs."""
-    if not path.is_file():
-        raise RobotError(f"{src}: {field}: file '{path}' does not exist; valid: an MJCF file")
     files = [path]
-    root = _read_xml(path, src, field)
+    reading = _Reading(files)
+    root = _read_xml(path, src, field, reading)
     base = path.parent
-    _inline_includes(root, base, src, field, files)
+    _inline_includes(root, base, src, field, reading, (path.resolve(),))
     used_angle = _set_angle(root, angle, src, field)
     repairs = _strip_scene_parts(root)
     repairs += _resolve_assets(root, base, src, field, files)
@@ -417,12 +478,40 @@ def parse_world(path: Path) -> mujoco.MjSpec:
     import mujoco
 
     path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
-    if not path.exists():
-        raise SceneError(f"scene file '{path}' does not exist; valid: an MJCF world file")
-    if not path.is_file():
-        raise SceneError(f"scene path '{path}' is not a file; valid: an MJCF world file")
+    problem = file_problem(path)
+    if problem is not None:
+        raise SceneError(f"scene file '{path}' {problem}; valid: an MJCF world file")
+    size = path.stat().st_size
+    if size > MAX_MJCF_BYTES:
+        raise SceneError(
+            f"scene file '{path}' is {size} bytes; valid: an MJCF world file of at most "
+            f"{MAX_MJCF_BYTES} bytes"
+        )
     try:
-        return mujoco.MjSpec.from_file(str(path))
+        with _parse_warnings() as warned:
+            spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
         detail = " ".join(str(exc).split())
         raise SceneError(f"scene file '{path}' is not valid MJCF: {detail}") from exc
+    if any("NaN" in w for w in warned):
+        raise SceneError(
+            f"scene file '{path}' contains a NaN (MuJoCo: {warned[0]}); valid: finite numbers"
+        )
+    for w in warned:  # anything else MuJoCo says while parsing: a Python warning
+        warnings.warn(f"MuJoCo: {w}", stacklevel=2)
+    return spec
+
+
+@contextlib.contextmanager
+def _parse_warnings() -> Iterator[list[str]]:
+    """Collect MuJoCo's C warnings in the block (instead of printing them and writing
+    ``MUJOCO_LOG.TXT``); yields the list, filled as they come."""
+    import mujoco  # here, not at the top (see Part.new_spec)
+
+    collected: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda text: collected.append(" ".join(text.split())))
+    try:
+        yield collected
+    finally:
+        mujoco.set_mju_user_warning(previous)

@@ -9,7 +9,6 @@ from pathlib import Path
 from pickplace.errors import RobotError
 from pickplace.robot import DEFAULT_ROBOT  # re-exported: where robots come from names it
 from pickplace.robot.description import RobotDescription
-from pickplace.robot.mjcf import part_digest
 
 
 def _robots_dir() -> Path:
@@ -75,6 +74,10 @@ def description_digest(desc: RobotDescription) -> str:
     Raises:
         RobotError: A file it names is missing.
     """
+    # Imported here: MuJoCo (and numpy) load only when a robot is, not with this module (the
+    # CLI imports it before it installs its signal handlers).
+    from pickplace.robot.mjcf import part_digest
+
     # The parsed description (every field), and its path: messages name the file.
     digest = hashlib.sha256(repr((desc.source, desc.name, desc.arm, desc.gripper)).encode())
     for mjcf, field_name, angle in (

@@ -24,9 +24,10 @@ import mujoco
 
 from pickplace.control.controllers import CONTROLLERS, make_controller
 from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.outfile import lock_path, lock_problem, name_max
 from pickplace.planning.planner import Candidate, PlanningReport
 from pickplace.planning.preflight import Preflight, PreflightConfig
-from pickplace.planning.timing import TimingConfig
+from pickplace.planning.timing import TimingConfig, check_speed
 from pickplace.record.viewer import parse_viewer_url
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
@@ -130,8 +131,10 @@ def validate_record_path(path: Path) -> Path:
     read-only file system.
 
     Raises:
-        InvalidInputError: Empty name, wrong suffix, a directory, a FIFO or device, a read-only
-            file, a missing or read-only folder, or a symlink into a missing folder.
+        InvalidInputError: Empty name, wrong suffix, a name longer than the file system allows,
+            a directory, a FIFO or device, a read-only file, a missing or read-only folder, a
+            symlink into a missing folder, or a lock file beside it that is a link or not a
+            plain file (:func:`pickplace.outfile.lock_problem`).
     """
     name = path.name
     if name in ("", ".", ".."):
@@ -145,6 +148,13 @@ def validate_record_path(path: Path) -> Path:
     if path.suffix != ".rrd":
         raise InvalidInputError(
             f"recording file '{path}' must end in .rrd (e.g. run.rrd)", field="record"
+        )
+    limit = name_max(path.parent)
+    if len(os.fsencode(name)) > limit:
+        raise InvalidInputError(
+            f"recording file name '{name[:40]}…' is {len(os.fsencode(name))} bytes long; this "
+            f"file system allows at most {limit}",
+            field="record",
         )
     target = path
     if path.is_symlink():
@@ -160,6 +170,9 @@ def validate_record_path(path: Path) -> Path:
         raise InvalidInputError(
             f"recording file '{path}': folder '{parent}' does not exist", field="record"
         )
+    problem = lock_problem(lock_path(target))
+    if problem is not None:
+        raise InvalidInputError(f"recording file '{path}': {problem}", field="record")
     if target.is_dir():
         raise InvalidInputError(
             f"recording file '{path}' is a directory; give a file name ending .rrd", field="record"
@@ -288,6 +301,7 @@ def validate_request(req: RunRequest) -> Scenario:
         raise InvalidInputError(
             f"seed must be an integer in [0, {MAX_SEED}], got {req.seed!r}", field="seed"
         )
+    check_speed(req.speed)
     lo, hi = CONTROL_RATE_RANGE_HZ
     if not (
         isinstance(req.control_rate_hz, int | float)
@@ -397,8 +411,20 @@ def resolve_request(req: RunRequest) -> ResolvedRun:
     # The world's timestep first: the robot is composed and calibrated at it.
     world = read_world(req.scene_path)
     check_timestep(req.scene_path, world.timestep)
-    rate = resolve_control_rate(req.run_control_rate_hz, world.timestep)
+    drawn = req.parameters is not None and req.parameters.get("control_rate") is not None
+    try:
+        rate = resolve_control_rate(req.run_control_rate_hz, world.timestep)
+    except InvalidInputError as exc:
+        if not drawn:
+            raise
+        raise varied_rate_error(req.run_control_rate_hz, exc) from None
     return ResolvedRun(req, scenario, world, resolve_description(req.robot), rate)
+
+
+def varied_rate_error(rate_hz: float, exc: InvalidInputError) -> InvalidInputError:
+    """``exc`` (:func:`resolve_control_rate`'s) about a control rate that ``--vary`` gave:
+    named as that option, not as the control rate's own."""
+    return InvalidInputError(f"--vary control_rate={rate_hz:g}: {exc}")
 
 
 def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, Task]:
@@ -583,4 +609,5 @@ __all__ = [
     "run",
     "valid_control_rates",
     "validate_record_path",
+    "varied_rate_error",
 ]

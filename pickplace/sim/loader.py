@@ -39,7 +39,14 @@ from pickplace.robot.registry import (
     description_digest,
     resolve_description,
 )
-from pickplace.world.scene import Scene, WorldFile, WorldNames, build_scene, read_world
+from pickplace.world.scene import (
+    Scene,
+    WorldFile,
+    WorldNames,
+    build_scene,
+    check_world,
+    read_world,
+)
 
 _SCENES: dict[str, Scene] = {}
 
@@ -90,6 +97,7 @@ def _compose(
 ) -> Scene:
     if spec.geom(names.brick_geom) is None:  # the gripper is calibrated on the brick's size
         raise UnknownNameError("geom", names.brick_geom, [g.name for g in spec.geoms if g.name])
+    check_world(spec, path, names)  # the world's own problems, before the robot's
     composition = load_robot(desc, spec, brick_geom=names.brick_geom, pad_slots=pad_slots)
     scene = build_scene(composition, path, names)
     robot = scene.robot

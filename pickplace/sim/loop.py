@@ -117,6 +117,31 @@ def control_substeps(control_rate_hz: float, timestep: float) -> int:
     return substeps
 
 
+# The most memory a run's tick log may take [bytes]: about an hour of simulated time at
+# 100 Hz for the bundled robots (3 kB a tick), six minutes at 1000 Hz.
+MAX_LOG_BYTES = 2**30
+
+
+def _check_log_size(scene: Scene, ticks: int, dt: float) -> None:
+    """Refuse a run whose tick log (:class:`TickLog`, preallocated) would pass
+    :data:`MAX_LOG_BYTES`.
+
+    Raises:
+        InvalidInputError: It would; the message gives the longest plan at this rate.
+    """
+    per_tick = TickLog.bytes_per_tick(scene)
+    if ticks * per_tick <= MAX_LOG_BYTES:
+        return
+    longest = MAX_LOG_BYTES / per_tick * dt
+    raise InvalidInputError(
+        f"the run would take {ticks} control ticks ({ticks * dt:.4g} s at {1 / dt:.6g} Hz) and "
+        f"its tick log {ticks * per_tick / 2**30:.3g} GiB at {per_tick / 1000:.1f} kB a tick; "
+        f"valid: at most {MAX_LOG_BYTES / 2**30:g} GiB, a plan of at most {longest:.0f} s at "
+        "this rate: raise the speed override (--speed), lower the control rate, or give the "
+        "robot faster speed_limits and accel_limits"
+    )
+
+
 class Simulation:
     """One run of a task with a controller; call :meth:`run`.
 
@@ -183,6 +208,7 @@ class Simulation:
 
         horizon = task.trajectory.end_time + self.criteria.settle_time + self.criteria.failure_grace
         self.max_ticks = int(np.ceil(horizon / self.dt)) + 2
+        _check_log_size(scene, self.max_ticks, self.dt)
         self.log = TickLog(scene, self.max_ticks, self.dt)
         self.ticks = 0
         self.assessed = 0  # rows of the log that are complete

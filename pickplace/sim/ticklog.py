@@ -100,6 +100,15 @@ class TickLog:
         self._pad_sides = np.zeros((len(sides), 2))  # per pad sensor: 1 in its side's column
         self._pad_sides[np.arange(len(sides)), sides] = 1.0
 
+    @staticmethod
+    def bytes_per_tick(scene: Scene) -> int:
+        """Memory one row of a log of ``scene`` takes [bytes] (it grows with the bodies and
+        sensors of the model)."""
+        row = TickLog(scene, 1, 1.0)
+        return sum(
+            v.nbytes for v in vars(row).values() if isinstance(v, np.ndarray) and v.base is None
+        )
+
     def derive(self, k0: int, k1: int) -> tuple[int, int] | None:
         """Fill the derived rows ``[k0, k1)`` from the raw ones (idempotent).
 

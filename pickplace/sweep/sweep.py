@@ -13,13 +13,20 @@ Backends (results are ordered by seed and do not depend on the backend):
   running trial, which is left out of the report). With more, each worker process runs one
   trial at a time and gets the next one only when it returns a result, so nothing is queued in
   a worker: a worker that dies (the OOM killer, a crash) fails its trial with reason
-  ``worker-died`` and a new worker takes the next trial; Ctrl-C, SIGTERM or SIGHUP (a
+  ``worker-died`` and a new worker takes the next trial; one that gives no result within the
+  trial time limit (``trial_timeout_s``, ``--trial-timeout``: stopped, stuck) is killed and
+  its trial failed with reason ``worker-timeout``. Ctrl-C, SIGTERM or SIGHUP (a
   KeyboardInterrupt in the calling thread) kills the workers at once and the report covers
   the trials finished so far, with ``"interrupted": true``. Workers ignore the terminal's
-  Ctrl-C themselves: only this process decides.
+  Ctrl-C themselves: only this process decides. The time limit needs a worker process to
+  kill: it does not apply to one worker (the trials run here) nor, yet, to Ray tasks.
 - ``ray``: the trials are Ray tasks (:mod:`pickplace.sweep.ray_backend`), on a running cluster
   (``address``) or a local one started for the sweep; the same rules for dead workers and
   interrupts.
+
+Every backend and worker count runs a trial through
+:func:`~pickplace.sweep.trial.guarded_trial`: an exception in a trial is that trial's
+``worker-error``, never a traceback that ends the sweep.
 
 Each trial keeps only its compact summary (:func:`pickplace.sweep.trial.compact_summary`: no event
 list, no plan), so memory grows by under a kilobyte per trial.
@@ -42,7 +49,12 @@ from pickplace.control.controllers import CONTROLLERS
 from pickplace.errors import InvalidInputError, RobotError, UnknownNameError
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
-from pickplace.run.runner import MAX_SEED, resolve_control_rate, validate_request
+from pickplace.run.runner import (
+    MAX_SEED,
+    resolve_control_rate,
+    validate_request,
+    varied_rate_error,
+)
 from pickplace.signals import STOP_SIGNALS, ignore_in_child
 from pickplace.sim.loader import load_scene
 from pickplace.sim.vary import VaryPlan
@@ -53,6 +65,7 @@ from pickplace.sweep.trial import (
     TRIAL_KEYS,
     WORKER_DIED,
     WORKER_ERROR,
+    WORKER_TIMEOUT,
     Add,
     Job,
     TrialSpec,
@@ -65,6 +78,10 @@ from pickplace.sweep.trial import (
 from pickplace.world.scene import read_world
 
 MAX_TRIALS = 100_000
+# A trial's time limit [s]: a worker without a result by then is killed (worker-timeout). A
+# trial takes about a second (a minute for the slowest robots on a loaded machine).
+DEFAULT_TRIAL_TIMEOUT_S = 600.0
+TRIAL_TIMEOUT_RANGE_S = (1.0, 86_400.0)
 BACKENDS = ("process", "ray")
 # What --compare can vary, each a field of TrialSpec.
 COMPARABLE = ("controller", "robot")
@@ -154,6 +171,9 @@ class SweepRequest:
         address: Address of a running Ray cluster (``ray`` only; None: start a local one).
         robot: A bundled robot's name or a ``robot.toml`` path (not with ``compare`` on the
             robot).
+        trial_timeout_s: Time limit of one trial in a worker process [s] (see the module
+            docstring), in :data:`TRIAL_TIMEOUT_RANGE_S`; None: :data:`DEFAULT_TRIAL_TIMEOUT_S`.
+            Not with the Ray backend (its tasks have no time limit yet).
     """
 
     scenario: str = "pick-place-random"
@@ -168,6 +188,7 @@ class SweepRequest:
     backend: str = "process"
     address: str | None = None
     robot: str = DEFAULT_ROBOT
+    trial_timeout_s: float | None = None
 
     def specs(self) -> tuple[TrialSpec, ...]:
         """One trial spec per arm (one without a comparison), in the order of the values."""
@@ -230,6 +251,19 @@ class SweepRequest:
                 raise InvalidInputError(f"--compare robot=...: {exc}") from exc
         for spec in self.specs():
             validate_request(spec.request(self.first_seed))
+        if self.trial_timeout_s is not None:
+            lo, hi = TRIAL_TIMEOUT_RANGE_S
+            timeout = self.trial_timeout_s
+            if not (isinstance(timeout, int | float) and lo <= timeout <= hi):
+                raise InvalidInputError(
+                    f"--trial-timeout must be in [{lo:g}, {hi:g}] s (one trial's time limit), "
+                    f"got {timeout!r}"
+                )
+            if self.backend == "ray":
+                raise InvalidInputError(
+                    "--trial-timeout applies to the process backend's worker processes; Ray "
+                    "tasks have no time limit yet: leave it out with --backend ray"
+                )
         if not 1 <= self.trials <= MAX_TRIALS:
             raise InvalidInputError(f"--trials must be in [1, {MAX_TRIALS}], got {self.trials}")
         if self.first_seed + self.trials - 1 > MAX_SEED:
@@ -253,13 +287,19 @@ class SweepRequest:
     def _validate_control_rates(self) -> None:
         """Every control rate the trials use is a whole number of the scene's steps."""
         rates = {self.control_rate_hz}
-        if "control_rate" in self.vary.names:
+        varied = "control_rate" in self.vary.names
+        if varied:
             rates = set(self.vary.spec("control_rate").values)
         if rates == {100.0}:
             return  # the runner's default: valid for every usable timestep
         timestep = read_world().timestep
         for rate in sorted(rates):
-            resolve_control_rate(rate, timestep)
+            try:
+                resolve_control_rate(rate, timestep)
+            except InvalidInputError as exc:
+                if not varied:
+                    raise
+                raise varied_rate_error(rate, exc) from None
 
 
 @dataclass(frozen=True)
@@ -312,13 +352,14 @@ def run_sweep(req: SweepRequest | ResolvedSweep, on_trial: Add | None = None) ->
             workers, start_s = run_ray(specs, jobs, add, req.address, req.workers)
         elif workers == 1:
             for a, seed in jobs:
-                summary = run_trial(specs[a], seed)
+                summary = guarded_trial(specs[a], seed)  # the workers' guard, here too
                 if summary["failure"] == "interrupted":  # a stop request, not a result
                     interrupted = True
                     break
                 add(summary)
         else:
-            _run_parallel(specs, jobs, workers, add)
+            timeout = req.trial_timeout_s or DEFAULT_TRIAL_TIMEOUT_S
+            _run_parallel(specs, jobs, workers, add, timeout)
     except KeyboardInterrupt:
         interrupted = True
     wall = time.perf_counter() - wall0
@@ -420,11 +461,21 @@ class _Worker:
             self.process.start()
         child.close()
         self.job: Job | None = None
+        self.since = 0.0  # time.monotonic() when the job was given [s]
         self.give(job)
 
     def give(self, job: Job | None) -> None:
         self.job = job
+        self.since = time.monotonic()
         self.conn.send(job)
+
+    def exit_text(self) -> str:
+        """How the dead worker ended: ``killed by signal N`` or ``exit N``."""
+        self.process.join(timeout=1.0)  # the sentinel fires before the exit code is known
+        code = self.process.exitcode
+        if code is None:
+            return "ended, exit status unknown"
+        return f"killed by signal {-code}" if code < 0 else f"exit {code}"
 
     def kill(self) -> None:
         with contextlib.suppress(OSError, AttributeError):
@@ -433,7 +484,15 @@ class _Worker:
         self.conn.close()
 
 
-def _run_parallel(specs: Sequence[TrialSpec], jobs: Sequence[Job], workers: int, add: Add) -> None:
+def _run_parallel(
+    specs: Sequence[TrialSpec],
+    jobs: Sequence[Job],
+    workers: int,
+    add: Add,
+    timeout_s: float = DEFAULT_TRIAL_TIMEOUT_S,
+) -> None:
+    """Run ``jobs`` on ``workers`` worker processes (see the module docstring); a worker that
+    holds a job longer than ``timeout_s`` [s] is killed and the job is a ``worker-timeout``."""
     ctx = _context()
     pending = deque(jobs)
     running: list[_Worker] = []
@@ -457,11 +516,19 @@ def _run_parallel(specs: Sequence[TrialSpec], jobs: Sequence[Job], workers: int,
                         w.conn.close()
                         running.remove(w)
                 elif w.process.sentinel in ready:  # died with a trial in hand
-                    code = w.process.exitcode
                     if w.job is not None:
                         arm, seed = w.job
-                        how = f"killed by signal {-code}" if code and code < 0 else f"exit {code}"
-                        add(lost_trial(seed, WORKER_DIED, how, specs[arm].arm))
+                        add(lost_trial(seed, WORKER_DIED, w.exit_text(), specs[arm].arm))
+                    w.kill()
+                    running.remove(w)
+                    if pending:
+                        running.append(_Worker(ctx, specs, pending.popleft()))
+            now = time.monotonic()
+            for w in list(running):  # stopped or stuck: no result in time
+                if w.job is not None and now - w.since > timeout_s:
+                    arm, seed = w.job
+                    detail = f"no result within {timeout_s:g} s (--trial-timeout); worker killed"
+                    add(lost_trial(seed, WORKER_TIMEOUT, detail, specs[arm].arm))
                     w.kill()
                     running.remove(w)
                     if pending:
@@ -474,11 +541,13 @@ def _run_parallel(specs: Sequence[TrialSpec], jobs: Sequence[Job], workers: int,
 __all__ = [
     "BACKENDS",
     "COMPARABLE",
+    "DEFAULT_TRIAL_TIMEOUT_S",
     "MAX_TRIALS",
     "SWEEP_WALL_TIME_FIELDS",
     "TRIAL_KEYS",
     "WORKER_DIED",
     "WORKER_ERROR",
+    "WORKER_TIMEOUT",
     "Comparison",
     "SweepRequest",
     "TrialSpec",

@@ -23,6 +23,7 @@ from pickplace.sim.verdict import RunResult
 
 WORKER_DIED = "worker-died"
 WORKER_ERROR = "worker-error"
+WORKER_TIMEOUT = "worker-timeout"
 POLL_PERIOD_S = 0.2  # a backend's main loop wakes at least this often [s]
 # Summary keys a trial keeps (plus ``failure_text``, ``parameters`` and ``arm``): everything
 # the report and the recording use, nothing that measures the wall clock.
@@ -133,7 +134,8 @@ def run_trial(spec: TrialSpec, seed: int) -> dict[str, Any]:
 
 
 def lost_trial(seed: int, reason: str, detail: str | None = None, arm: str = "") -> dict[str, Any]:
-    """The entry of a trial that gave no summary (``worker-died``, ``worker-error``)."""
+    """The entry of a trial that gave no summary (``worker-died``, ``worker-error``,
+    ``worker-timeout``)."""
     entry: dict[str, Any] = {"seed": seed, "success": False, "failure": reason, "lost": True}
     if detail:
         entry["detail"] = detail
@@ -144,7 +146,7 @@ def lost_trial(seed: int, reason: str, detail: str | None = None, arm: str = "")
 
 def guarded_trial(spec: TrialSpec, seed: int) -> dict[str, Any]:
     """:func:`run_trial`, with an exception reported as a ``worker-error`` trial (never as a
-    traceback): what a worker runs."""
+    traceback): what every backend runs, for any number of workers."""
     try:
         return run_trial(spec, seed)
     except Exception as exc:
@@ -162,6 +164,7 @@ __all__ = [
     "TRIAL_KEYS",
     "WORKER_DIED",
     "WORKER_ERROR",
+    "WORKER_TIMEOUT",
     "Add",
     "Job",
     "TrialSpec",

@@ -28,6 +28,7 @@ from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from pickplace.robot.registry import DEFAULT_WORLD
 
 __all__ = [
+    "BRICK_MASS_RANGE",
     "ROBOT_CONAFFINITY",
     "ROBOT_CONTYPE",
     "BinGeometry",
@@ -36,6 +37,7 @@ __all__ = [
     "WorldFile",
     "WorldNames",
     "build_scene",
+    "check_world",
     "name_to_id",
     "names_of",
     "read_world",
@@ -372,6 +374,87 @@ def read_world(path: str | Path | None = None) -> WorldFile:
     if stamps is not None:
         _WORLDS[resolved] = (stamps, world)
     return world
+
+
+BRICK_MASS_RANGE = (1e-3, 1e3)
+"""Mass of the world's brick [kg]: from a gram to a tonne (``--vary brick_mass`` takes
+[0.01, 100])."""
+
+
+def check_world(spec: mujoco.MjSpec, path: Path, names: WorldNames | None = None) -> None:
+    """Check the world file on its own, before a robot is composed into it, so that its
+    problems are reported as the world file's (not the robot's): it compiles alone, its
+    numbers are finite, the brick is a box of positive size and mass on a free body, and its
+    footprint fits in both bins.
+
+    Args:
+        spec: The parsed world (:func:`read_world`); copied, not changed.
+        path: The world file, named in messages.
+        names: World names; default :class:`WorldNames`.
+
+    Raises:
+        SceneError: One of those does not hold; the message names the element.
+        UnknownNameError: The brick or a bin is missing.
+    """
+    names = names or WorldNames()
+    try:
+        model = spec.copy().compile()
+    except ValueError as exc:
+        detail = " ".join(str(exc).split())
+        raise SceneError(
+            f"scene file '{path}' does not compile on its own: {detail}; valid: a world file "
+            "that MuJoCo compiles without a robot"
+        ) from exc
+    for what, values in (
+        ("body positions", model.body_pos),
+        ("body orientations", model.body_quat),
+        ("geom positions", model.geom_pos),
+        ("geom sizes", model.geom_size),
+        ("body masses", model.body_mass),
+    ):
+        bad = np.flatnonzero(~np.isfinite(values).reshape(len(values), -1).all(axis=1))
+        if bad.size:
+            kind = mujoco.mjtObj.mjOBJ_BODY if what.startswith("body") else mujoco.mjtObj.mjOBJ_GEOM
+            name = mujoco.mj_id2name(model, kind, int(bad[0])) or f"#{int(bad[0])}"
+            raise SceneError(
+                f"scene file '{path}': {what} of '{name}' are not finite "
+                f"({values[int(bad[0])].tolist()}); valid: finite numbers"
+            )
+    obj = mujoco.mjtObj
+    body = name_to_id(model, obj.mjOBJ_BODY, names.brick_body)
+    geom = name_to_id(model, obj.mjOBJ_GEOM, names.brick_geom)
+    joint = int(model.body_jntadr[body])
+    if joint < 0 or model.jnt_type[joint] != mujoco.mjtJoint.mjJNT_FREE:
+        raise SceneError(
+            f"scene file '{path}': brick body '{names.brick_body}' has no free joint; valid: a "
+            "body with <freejoint/>"
+        )
+    if model.geom_type[geom] != mujoco.mjtGeom.mjGEOM_BOX:
+        kind = mujoco.mjtGeom(int(model.geom_type[geom])).name.removeprefix("mjGEOM_").lower()
+        raise SceneError(
+            f"scene file '{path}': brick geom '{names.brick_geom}' is a {kind}; valid: a box "
+            "(the gripper is calibrated on its size)"
+        )
+    lo, hi = BRICK_MASS_RANGE
+    mass = float(model.body_mass[body])
+    if not lo <= mass <= hi:
+        raise SceneError(
+            f"scene file '{path}': brick body '{names.brick_body}' has mass {mass:g} kg; "
+            f"valid: [{lo:g}, {hi:g}] kg"
+        )
+    half = model.geom_size[geom]
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    for bin_name in (names.source_bin, names.target_bin):
+        inner = _bin_geometry(model, data, bin_name).inner_half_extents
+        fits = bool(np.all(half[:2] <= inner) or np.all(half[1::-1] <= inner))
+        if not fits:
+            raise SceneError(
+                f"scene file '{path}': brick geom '{names.brick_geom}' is "
+                f"{2 * half[0]:g} x {2 * half[1]:g} m, larger than bin '{bin_name}' "
+                f"({2 * inner[0]:g} x {2 * inner[1]:g} m inside); valid: a brick whose "
+                "footprint fits in both bins"
+            )
 
 
 def _world_contact_bodies(model: mujoco.MjModel, robot: np.ndarray, brick_body: int) -> list[int]:
