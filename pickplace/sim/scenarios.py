@@ -12,8 +12,8 @@ state its outcomes); the parametrised test picks it up.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from mink.lie import SE3
@@ -26,7 +26,7 @@ from pickplace.planning.planner import PickPlacePlanner
 from pickplace.planning.timing import TimingConfig
 from pickplace.planning.trajectory import PoseTrajectory
 from pickplace.sim import faults
-from pickplace.sim.catalog import CATALOG
+from pickplace.sim.catalog import CATALOG, ScenarioInfo
 from pickplace.sim.goals import PlaceGoal, ReachGoal
 from pickplace.sim.task import Fault, Task
 from pickplace.world.placements import (
@@ -239,32 +239,15 @@ Builder = Callable[[BuildRequest], Task]
 
 
 @dataclass(frozen=True)
-class Scenario:
-    """A named scenario.
+class Scenario(ScenarioInfo):
+    """A named scenario: its row of the catalogue (:class:`~pickplace.sim.catalog.ScenarioInfo`:
+    name, summary, documented outcomes) and the builder of its task.
 
     Attributes:
-        name: Registry key.
-        summary: One line shown by ``pickplace scenarios``.
         build: Builds the task (see :class:`BuildRequest`).
-        expected: ``"success"`` or the failure reason the scenario is designed to produce
-            with the default controller (``qp``).
-        expected_with: Documented outcomes with other controllers, where they differ or are
-            the point of the scenario (e.g. ``{"pinv": "limit-violated"}``).
-        uses_brick: Whether ``--brick`` applies.
-        random: Whether the seed changes the task.
     """
 
-    name: str
-    summary: str
-    build: Builder
-    expected: str = "success"
-    expected_with: Mapping[str, str] = field(default_factory=dict)
-    uses_brick: bool = True
-    random: bool = False
-
-    def outcomes(self) -> dict[str, str]:
-        """Documented outcome per controller: ``qp`` and every one in ``expected_with``."""
-        return {"qp": self.expected, **self.expected_with}
+    build: Builder = field(kw_only=True)
 
 
 def _nominal(req: BuildRequest) -> Task:
@@ -339,13 +322,7 @@ BUILDERS: dict[str, Builder] = {
 
 SCENARIOS: dict[str, Scenario] = {
     name: Scenario(
-        info.name,
-        info.summary,
-        BUILDERS[name],
-        info.expected,
-        info.expected_with,
-        info.uses_brick,
-        info.random,
+        **{f.name: getattr(info, f.name) for f in fields(ScenarioInfo)}, build=BUILDERS[name]
     )
     for name, info in CATALOG.items()
 }
