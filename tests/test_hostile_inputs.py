@@ -221,9 +221,30 @@ def test_help_and_version_to_a_reader_that_has_gone_are_exit_141_like_any_output
 
 # ---------------------------------------------------------------------------- long planning
 
-# At 0.3 % of the speed limits the nominal plan lasts about 1100 s: its pre-flight runs for
-# many seconds of wall time (planning at full speed takes a tenth of a second).
-CRAWL = "0.003"
+# At 0.1 % of the speed limits (the lowest --speed allowed) the nominal plan lasts about an
+# hour: its pre-flight runs for seconds of wall time, planning at full speed for a tenth of one.
+CRAWL = "0.001"
+
+
+def _wall_time(*args: str) -> float:
+    t0 = time.monotonic()
+    code, _, err = finish(console(*args), 120)
+    assert code == 0, err
+    return time.monotonic() - t0
+
+
+@pytest.fixture(scope="module")
+def while_planning() -> float:
+    """Seconds after its start at which a crawling `plan` or `run` is surely still planning.
+
+    Measured on this machine as it is now, not assumed: halfway between the wall time of a
+    normal `plan` (imports, set-up, planning at full speed) and that of the crawling one, so a
+    faster or a busier CPU moves both ends alike.
+    """
+    normal = _wall_time("plan", "--json")
+    crawling = _wall_time("plan", "--speed", CRAWL, "--json")
+    assert crawling > normal + 1.0, (normal, crawling)
+    return 0.5 * (normal + crawling)
 
 
 @pytest.mark.parametrize(
@@ -234,13 +255,13 @@ CRAWL = "0.003"
     ],
 )
 def test_a_stop_signal_ends_a_long_planning_promptly(
-    tmp_path: Path, command: str, sig: signal.Signals, message: str
+    tmp_path: Path, command: str, sig: signal.Signals, message: str, while_planning: float
 ) -> None:
     rrd = tmp_path / "never.rrd"
     rrd.write_text(PRECIOUS)
     extra = ["--record", str(rrd)] if command == "run" else []
     proc = console(command, "--speed", CRAWL, *extra, "--json")
-    time.sleep(5.0)  # imports done, the pre-flight of the long plan under way
+    time.sleep(while_planning)  # imports done, the pre-flight of the long plan under way
     assert proc.poll() is None, proc.communicate()
     t0 = time.monotonic()
     proc.send_signal(sig)
