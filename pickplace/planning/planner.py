@@ -59,7 +59,13 @@ from pickplace.planning.plan import (
     plan_pick_place,
     swung_pose,
 )
-from pickplace.planning.preflight import Preflight, PreflightConfig, PreflightResult, Problem
+from pickplace.planning.preflight import (
+    Preflight,
+    PreflightConfig,
+    PreflightResult,
+    Problem,
+    start_configuration,
+)
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 from pickplace.signals import stop_point
 from pickplace.world.scene import Scene
@@ -193,6 +199,21 @@ class PlanningReport:
 
 
 @dataclass(frozen=True)
+class Start:
+    """Where a plan starts when not at the home posture (a replan at run time).
+
+    Attributes:
+        q: The arm's commanded configuration [rad], one angle per arm joint: the pre-flight's
+            IK starts from it.
+        X_WG: The tool pose there, in world: the plan's first keyframe (the pose the plan being
+            replaced holds, so that the planned pose does not jump).
+    """
+
+    q: np.ndarray
+    X_WG: SE3
+
+
+@dataclass(frozen=True)
 class Ranked:
     """A grasp candidate and its cheap tests (see the module docstring).
 
@@ -318,7 +339,13 @@ class PickPlacePlanner:
         self._home_azimuth = math.atan2(p_home[1], p_home[0])
         self._home_yaw = yaw_of(self.X_WG_home.rotation())
 
-    def plan(self, X_WO_pick: SE3, X_WO_place: SE3, first_feasible: bool = True) -> PlanningReport:
+    def plan(
+        self,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        first_feasible: bool = True,
+        start: Start | None = None,
+    ) -> PlanningReport:
         """Rank the candidates, pre-flight the best few in order; stop at the first feasible
         one (unless told not to).
 
@@ -327,16 +354,22 @@ class PickPlacePlanner:
             X_WO_place: Goal pose of the brick, in world.
             first_feasible: Stop at the first feasible candidate (else pre-flight all of the
                 best :data:`MAX_PREFLIGHTS`).
+            start: Where the plans start (configuration and tool pose); None: at home.
+
+        Raises:
+            PlanError: ``start.q`` is not one finite angle per arm joint.
         """
         t0 = time.perf_counter()
-        ranked = self.rank(X_WO_pick, X_WO_place)
+        if start is not None:
+            start = Start(start_configuration(self.scene, start.q), start.X_WG)
+        ranked = self.rank(X_WO_pick, X_WO_place, start)
         tried: list[Candidate] = []
         chosen: int | None = None
         for r in ranked[:MAX_PREFLIGHTS]:
             if r.problem is not None:
                 break
             stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
-            plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, r.grasp)
+            plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, r.grasp, start)
             tried.append(Candidate(r.grasp.label, plan, result, warning))
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
@@ -344,7 +377,7 @@ class PickPlacePlanner:
                     break
         if not tried:  # none passed the cheap tests: the best one, with its problem
             best = ranked[0]
-            plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp)
+            plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp, start=start)
             tried.append(Candidate(best.grasp.label, plan, self._refused(plan, best)))
         return PlanningReport(
             tuple(tried), chosen, time.perf_counter() - t0, self.preflight.config, len(ranked)
@@ -369,8 +402,11 @@ class PickPlacePlanner:
             np.zeros((0, nq)),
         )
 
-    def rank(self, X_WO_pick: SE3, X_WO_place: SE3) -> list[Ranked]:
+    def rank(self, X_WO_pick: SE3, X_WO_place: SE3, start: Start | None = None) -> list[Ranked]:
         """Every grasp candidate with its cheap tests, best first (see the module docstring).
+
+        The wrist's margin is predicted from ``start`` (its last joint's angle and tool yaw),
+        by default from home.
 
         Vectorised over the candidates: the pick poses ``X_WG = X_WO X_OG``, the place poses
         (of ``X_WO_goal X_OG`` and ``X_WO_goal Rz(π) X_OG``, the one whose yaw is nearer the
@@ -420,7 +456,11 @@ class PickPlacePlanner:
         # the yaw of the home tool swung to face the pick), then over the transfer (the pick's
         # yaw to the place's, less the swing between them: the via-point turns with the
         # swing). Without a vertical last axis, or without limits, the margin is inf.
-        home_yaw = self._home_yaw + _wrap(np.arctan2(*from_pick.T[::-1]) - self._home_azimuth)
+        yaw0, azimuth0, q0 = self._home_yaw, self._home_azimuth, robot.q_home
+        if start is not None:
+            p0 = start.X_WG.translation() - base
+            yaw0, azimuth0, q0 = yaw_of(start.X_WG.rotation()), math.atan2(p0[1], p0[0]), start.q
+        home_yaw = yaw0 + _wrap(np.arctan2(*from_pick.T[::-1]) - azimuth0)
         to_pick = _wrap(yaw_pick - home_yaw)
         p_to = p_place[:, :2] - base[:2]
         swing = _wrap(np.arctan2(*p_to.T[::-1]) - np.arctan2(*from_pick.T[::-1]))
@@ -429,7 +469,7 @@ class PickPlacePlanner:
         margin = np.full(n, np.inf)
         j = robot.n_joints - 1
         if abs(self.wrist_axis_z) >= 0.5 and not robot.continuous[j]:
-            q_pick = robot.q_home[j] + to_pick / self.wrist_axis_z
+            q_pick = q0[j] + to_pick / self.wrist_axis_z
             q_place = q_pick + transfer / self.wrist_axis_z
             qs = np.stack([q_pick, q_place])
             margin = np.minimum(qs - robot.q_min[j], robot.q_max[j] - qs).min(axis=0)
@@ -485,22 +525,23 @@ class PickPlacePlanner:
         )
 
     def timed_plan(
-        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate
+        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate, start: Start | None = None
     ) -> tuple[Plan, PreflightResult, str | None]:
         """One candidate: the path swept by the pre-flight, then (if it passes) timed by the
-        robot's limits and pre-flighted again as timed.
+        robot's limits and pre-flighted again as timed; from ``start`` (default: home).
 
         Returns:
             The timed plan, its pre-flight and the timing's warning (None if the slip budget
             held); or, when the path sweep fails, the swept plan, the sweep's result (its first
             problem is on the path, whatever the timing) and None.
         """
-        path = self.make_plan(X_WO_pick, X_WO_place, grasp, self.sweep_config)
-        swept = self.preflight.run(path, X_WO_pick, X_WO_place)
+        path = self.make_plan(X_WO_pick, X_WO_place, grasp, self.sweep_config, start)
+        q_start = None if start is None else start.q
+        swept = self.preflight.run(path, X_WO_pick, X_WO_place, q_start=q_start)
         if not swept.feasible:
             return path, swept, None
         timed, warning = self.retimed(path, swept.times, swept.q)
-        result = self.preflight.run(timed, X_WO_pick, X_WO_place)
+        result = self.preflight.run(timed, X_WO_pick, X_WO_place, q_start=q_start)
         return timed, result, warning
 
     def retimed(self, path: Plan, times: np.ndarray, q: np.ndarray) -> tuple[Plan, str | None]:
@@ -538,19 +579,20 @@ class PickPlacePlanner:
         X_WO_place: SE3,
         grasp: GraspCandidate | None = None,
         config: PlanConfig | None = None,
+        start: Start | None = None,
     ) -> Plan:
         """The pick-and-place plan with ``grasp`` (default: the best-ranked one), the gripper
         opened to the grasp's open width, timed by Cartesian limits (``config``, default the
-        planner's)."""
+        planner's), from ``start``'s tool pose (default: home's)."""
         if grasp is None:
-            grasp = self.rank(X_WO_pick, X_WO_place)[0].grasp
+            grasp = self.rank(X_WO_pick, X_WO_place, start)[0].grasp
         config = replace(
             config or self.config,
             open_width=grasp.open_width,
             release_width=self.config.open_width,  # the whole opening its open time spans
         )
         return plan_pick_place(
-            self.X_WG_home,
+            self.X_WG_home if start is None else start.X_WG,
             X_WO_pick,
             X_WO_place,
             self.clearance_z,

@@ -197,9 +197,14 @@ class Preflight:
         self._gripper_qpos = scene.robot.qpos_for_width(0.0)
 
     def run(
-        self, plan: Plan, X_WO_start: SE3, X_WO_goal: SE3 | None, stop_at_problem: bool = True
+        self,
+        plan: Plan,
+        X_WO_start: SE3,
+        X_WO_goal: SE3 | None,
+        stop_at_problem: bool = True,
+        q_start: np.ndarray | None = None,
     ) -> PreflightResult:
-        """Pre-flight ``plan`` from the home posture.
+        """Pre-flight ``plan`` from the home posture, or from ``q_start``.
 
         The IK and collision checks run tick by tick (a problem there can end the run early);
         the joint, speed and σmin checks run on the whole joint path afterwards, vectorised;
@@ -210,8 +215,15 @@ class Preflight:
             X_WO_start: Brick pose before it is grasped.
             X_WO_goal: Brick pose after it is released (None: it stays at the start).
             stop_at_problem: Stop at the first problem (else check the whole plan).
+            q_start: Commanded arm configuration the plan starts from [rad] (a replan at run
+                time starts where the arm stopped); None: the robot's home posture. The plan's
+                first keyframe should be its tool pose.
+
+        Raises:
+            PlanError: ``q_start`` is not one finite angle per arm joint.
         """
         cfg, sc, dt = self.config, self.scene, self.dt
+        q0 = start_configuration(sc, q_start)
         traj, phases = plan.trajectory, plan.phases
         X_GO = plan.X_OG.inverse() if plan.X_OG is not None else None
         width_held = grasp_width(plan, sc)
@@ -227,7 +239,7 @@ class Preflight:
         clear_path = np.full(n, cfg.detection_distance)
         tracking_sq = cfg.tracking_tolerance**2
         midpoint = cfg.midpoint_feedforward
-        q = sc.robot.q_home.copy()
+        q = q0
         found: Problem | None = None  # the first IK or collision problem
         end = n
         half_dt = 0.5 * dt
@@ -439,6 +451,25 @@ class Preflight:
             sc.geom_name(b),
             (float(pos[0]), float(pos[1]), float(pos[2])),
         )
+
+
+def start_configuration(scene: Scene, q_start: np.ndarray | None) -> np.ndarray:
+    """A copy of ``q_start`` [rad], checked to be one finite angle per arm joint, or of the
+    robot's home posture when None.
+
+    Raises:
+        PlanError: Wrong length or a non-finite value; the message gives the joint count.
+    """
+    if q_start is None:
+        return scene.robot.q_home.copy()
+    q = np.array(q_start, dtype=np.float64).reshape(-1)
+    n = scene.robot.n_joints
+    if q.shape != (n,) or not np.all(np.isfinite(q)):
+        raise PlanError(
+            f"a start configuration must be {n} finite joint angles [rad] (one per arm joint of "
+            f"{scene.robot.name}), got {np.asarray(q_start).tolist()!r}"
+        )
+    return q
 
 
 def check_plan_duration(duration: float) -> None:

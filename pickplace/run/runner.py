@@ -34,6 +34,7 @@ from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
 from pickplace.sim.events import EventKind
 from pickplace.sim.loader import load_scene
 from pickplace.sim.loop import SimConfig, Simulation, TickObserver
+from pickplace.sim.recovery import check_attempts
 from pickplace.sim.scenarios import BuildRequest, Scenario, get_scenario
 from pickplace.sim.task import Task
 from pickplace.sim.variation import apply_to_scene, apply_to_task
@@ -79,6 +80,10 @@ class RunRequest:
             applied by :mod:`pickplace.sim.variation`; a drawn ``speed`` or ``control_rate``
             takes the place of :attr:`speed` or :attr:`control_rate_hz` (which must then be
             left at their defaults). Recorded as the summary's ``parameters``.
+        attempts: Most attempts the run may take (1 to
+            :data:`~pickplace.sim.recovery.MAX_ATTEMPTS`): after a missed grasp or a drop it
+            stops the arm, waits for the brick to rest and plans again from there
+            (:mod:`pickplace.sim.recovery`); 1 (the default): the first failure ends the run.
     """
 
     scenario: str = "pick-place"
@@ -94,6 +99,7 @@ class RunRequest:
     pace: float | None = None
     speed: float = 1.0
     parameters: ParameterDraw | None = None
+    attempts: int = 1
     observers: Sequence[TickObserver] = field(default=(), compare=False)
 
     def recording_id(self, robot_name: str) -> str:
@@ -302,6 +308,7 @@ def validate_request(req: RunRequest) -> Scenario:
             f"seed must be an integer in [0, {MAX_SEED}], got {req.seed!r}", field="seed"
         )
     check_speed(req.speed)
+    check_attempts(req.attempts)
     lo, hi = CONTROL_RATE_RANGE_HZ
     if not (
         isinstance(req.control_rate_hz, int | float)
@@ -443,6 +450,7 @@ def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, T
             req.brick,
             controller=req.controller,
             timing=TimingConfig(speed=req.run_speed),
+            attempts=req.attempts,
         )
     )
     if req.parameters is not None:  # after planning: what the plan must not know

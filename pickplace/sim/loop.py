@@ -22,6 +22,12 @@ explicit fault injected by a scenario (:mod:`pickplace.sim.faults`).
 The loop knows nothing of grasps or bins: the task's goal (:mod:`pickplace.sim.goals`) supplies the
 checks that judge each block (:mod:`pickplace.sim.checks`) and the verdict on the end state, from
 geometry stated in :class:`~pickplace.sim.checks.SuccessCriteria`.
+
+Nor does it know when to try again: a task with a recovery (:class:`~pickplace.sim.task.Recovery`,
+e.g. :mod:`pickplace.sim.recovery`) is asked about the failures of each block before they count,
+and after each block; it may replace the plan being executed (:meth:`Simulation.replace_plan`),
+which is all the loop itself can do about it: from the next tick on it samples the new plan at
+``t - t_start``, with a new set of the goal's checks.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ import copy
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import mujoco
@@ -40,7 +46,7 @@ from pickplace.control.controllers import IK_STATUSES, DiffIKController, IKStatu
 from pickplace.errors import ControllerError, InvalidInputError, require_positive
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PlanningReport
-from pickplace.sim.checks import Check, CheckContext, FailureReason, SuccessCriteria
+from pickplace.sim.checks import Check, CheckContext, Failure, FailureReason, SuccessCriteria
 from pickplace.sim.events import Event, EventKind
 from pickplace.sim.task import Task
 from pickplace.sim.ticklog import CONTROLLER_NONFINITE, FINITE, STATE_NONFINITE, TickLog
@@ -203,11 +209,13 @@ class Simulation:
         self._views = _DataViews(self.data)
         autoreset_off = self.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_AUTORESET
         self._check_qacc = bool(autoreset_off)
+        self._plan = task.plan
+        self.plan_start = 0.0  # run time at which the plan's clock reads 0 [s]
+        self._plan_replaced = False  # in the block being assessed
         self._sample = task.plan.trajectory.sample
         self._command = controller.command
 
-        horizon = task.trajectory.end_time + self.criteria.settle_time + self.criteria.failure_grace
-        self.max_ticks = int(np.ceil(horizon / self.dt)) + 2
+        self.max_ticks = self._horizon_ticks(task.plan, 0.0)
         _check_log_size(scene, self.max_ticks, self.dt)
         self.log = TickLog(scene, self.max_ticks, self.dt)
         self.ticks = 0
@@ -227,8 +235,55 @@ class Simulation:
 
     @property
     def plan(self) -> Plan:
-        """The plan being executed."""
-        return self.task.plan
+        """The plan being executed (the task's, until a recovery replaced it)."""
+        return self._plan
+
+    def _horizon_ticks(self, plan: Plan, t_start: float) -> int:
+        """The most ticks the run can take with ``plan`` started at run time ``t_start`` [s]:
+        to its end, the settling and the grace after a failure."""
+        cr = self.criteria
+        horizon = t_start + plan.trajectory.end_time + cr.settle_time + cr.failure_grace
+        return int(np.ceil(horizon / self.dt)) + 2
+
+    def replace_plan(self, plan: Plan, t_start: float, text: str) -> None:
+        """Execute ``plan`` from the next tick to be commanded on, sampled at run time minus
+        ``t_start``; the goal's checks start anew on it (a new set, whose context has the plan
+        and ``t_start``), its keyframes get their events, the log grows to its horizon, and a
+        ``replan`` event at the next tick says ``text``.
+
+        A recovery calls this between blocks (:class:`~pickplace.sim.task.Recovery`). For the
+        commanded motion to continue without a step, the new plan should start where the old
+        one is at ``t_start`` — e.g. ``t_start`` the last commanded tick's time and the plan's
+        first pose and velocity that tick's planned ones.
+
+        Args:
+            plan: The plan to execute.
+            t_start: Run time at which the plan's clock reads 0 [s]: at most the next tick's
+                time, k·dt.
+            text: What the event says (why the plan was replaced).
+
+        Raises:
+            InvalidInputError: ``t_start`` is not finite or lies after the next tick, or the
+                run's tick log would pass :data:`MAX_LOG_BYTES` (nothing is replaced then).
+        """
+        now = self.ticks * self.dt
+        if not (math.isfinite(t_start) and t_start <= now + 1e-9):
+            raise InvalidInputError(
+                f"a plan may start at most at the next tick's time {now:.4f} s, got {t_start!r}"
+            )
+        max_ticks = self._horizon_ticks(plan, t_start)
+        _check_log_size(self.scene, max_ticks, self.dt)
+        self.log.grow(max_ticks)
+        self.max_ticks = max_ticks
+        self._plan = plan
+        self.plan_start = float(t_start)
+        self._sample = plan.trajectory.sample
+        self._keyframe_times = [(t_start + k.t, k.name) for k in plan.trajectory.keyframes]
+        self._next_keyframe = 0
+        self.context = replace(self.context, plan=plan, t_start=self.plan_start)
+        self.checks = self.task.goal.checks(self.context)
+        self._plan_replaced = True
+        self.emit(EventKind.REPLAN, f"plan replaced at t={now:.2f} s: {text}", level="warn")
 
     def pad_forces(self) -> np.ndarray:
         """Normal force [N] of the brick on the left and right pads (from the pad sensors)."""
@@ -279,7 +334,7 @@ class Simulation:
             if planning is not None:
                 self._planning_events(planning)
             if planning is None or planning.feasible:
-                self.advance(self.max_ticks)
+                self.advance()
         except KeyboardInterrupt:
             interrupted = True
             # Complete the rows already simulated (idempotent), without judging them.
@@ -333,8 +388,9 @@ class Simulation:
             tick=0,
         )
 
-    def advance(self, ticks: int) -> None:
-        """Simulate up to ``ticks`` more control ticks, fewer if the run ends, and assess them.
+    def advance(self, ticks: int | None = None) -> None:
+        """Simulate up to ``ticks`` more control ticks (None: to the end of the run), fewer if
+        the run ends, and assess them.
 
         Works block by block: the commands of a block's ticks (:meth:`_command_ticks`), then
         its physics tick by tick (:meth:`_physics_tick`), then :meth:`assess`. The IK never
@@ -346,12 +402,10 @@ class Simulation:
         Raises:
             InvalidInputError: ``ticks`` is negative.
         """
-        if ticks < 0:
+        if ticks is not None and ticks < 0:
             raise InvalidInputError(f"ticks must be >= 0, got {ticks}")
-        limit = min(self.max_ticks, self.ticks + ticks)
-        end = self.task.trajectory.end_time
+        target = None if ticks is None else self.ticks + ticks
         settle_ticks = round(self.criteria.settle_time / self.dt)
-        end_tick = int(np.ceil(end / self.dt - 1e-9))
         goal, scene, data, criteria = self.task.goal, self.scene, self.data, self.criteria
         nonfinite = self.log.nonfinite
         # MuJoCo's warnings become events instead of lines in ./MUJOCO_LOG.TXT.
@@ -359,7 +413,13 @@ class Simulation:
         mujoco.set_mju_user_warning(self._on_mujoco_warning)
         try:
             stopped = False
-            while self.ticks < limit and not stopped:
+            while not stopped:
+                # The plan (and with it the run's end) may have been replaced after a block.
+                limit = self.max_ticks if target is None else min(self.max_ticks, target)
+                if self.ticks >= limit:
+                    break
+                end = self.plan_start + self._plan.trajectory.end_time
+                end_tick = int(np.ceil(end / self.dt - 1e-9))
                 k0 = self.ticks
                 k1 = self._command_ticks(k0, min(k0 + self.block_ticks, limit))
                 for k in range(k0, k1):
@@ -379,6 +439,9 @@ class Simulation:
                 if self.ticks > k0:
                     self.q_cmd = self.log.q_cmd[self.ticks - 1].copy()
                 self.assess()
+                if self._plan_replaced and self.failure is None:
+                    stopped = False  # a new plan goes on from here
+                self._plan_replaced = False
         finally:
             mujoco.set_mju_user_warning(previous_handler)
 
@@ -399,12 +462,13 @@ class Simulation:
         """The per-tick part of :meth:`_command_ticks`: plan samples and IK."""
         log, dt, ff = self.log, self.dt, self._ff
         sample, command = self._sample, self._command
-        segment_index = self.task.trajectory.segment_index
+        segment_index = self._plan.trajectory.segment_index
+        t_start = self.plan_start
         dynamics = self._dynamics if self._use_dynamics else None
         q_cmd = self.q_cmd
         qdot_prev = log.qdot_cmd[k0 - 1] if k0 > 0 else self._zero_qdot
         for k in range(k0, k1):
-            t = k * dt
+            t = k * dt - t_start  # the plan's clock
             x_plan, V_plan, width = sample(t)
             t0 = time.perf_counter_ns()
             res = command(q_cmd, x_plan, V_plan)
@@ -471,22 +535,32 @@ class Simulation:
 
         Keyframe events first, then the goal's checks on the block; the earliest failure wins,
         and of failures at one tick the check listed first (the goal's order is the
-        precedence); only the first failure of the run counts. Observers then receive the
-        completed rows.
+        precedence); only the first failure of the run counts. A task's recovery is asked
+        first whether it takes the block's failures up (the run then goes on, on a plan it
+        puts in place), and after the block whether the run must end. Observers then receive
+        the completed rows.
         """
         k0, k1 = self.assessed, self.ticks
         if k1 <= k0:
             return
         self._derive(k0, k1)
         self._keyframe_events(k0, k1)
-        first = None
+        found: list[Failure] = []
         for check in self.checks:
-            found = check.first_failure(self.log, k0, k1)
-            if found is not None and (first is None or found.tick < first.tick):
-                first = found
-        if first is not None:
-            self.fail(first.reason, first.text, tick=first.tick)
+            failure = check.first_failure(self.log, k0, k1)
+            if failure is not None:
+                found.append(failure)
+        found.sort(key=lambda f: f.tick)  # stable: of one tick, the check listed first
+        recovery = self.task.recovery
+        if found and (
+            recovery is None or self.failure is not None or not recovery.take_up(self, found)
+        ):
+            self.fail(found[0].reason, found[0].text, tick=found[0].tick)
         self.assessed = k1
+        if recovery is not None and self.failure is None:
+            final = recovery.after_block(self)
+            if final is not None:
+                self.fail(final.reason, final.text, tick=final.tick)
         for obs in self.observers:
             obs.on_ticks(self, k0, k1)
 
@@ -517,9 +591,11 @@ class Simulation:
             k = k0 + i
             self._next_keyframe += 1
             err = self.log.position_error[k]
+            t0 = self.plan_start
+            of_plan = "" if t0 == 0.0 else f" of the plan started at t={t0:.2f} s"
             self.emit(
                 EventKind.KEYFRAME,
-                f"keyframe '{name}' reached (planned t={kt:.2f} s, "
+                f"keyframe '{name}' reached (planned t={kt - self.plan_start:.2f} s{of_plan}, "
                 f"tool {err * 1000:.1f} mm from plan)",
                 tick=k,
             )
@@ -546,7 +622,8 @@ class Simulation:
         else:
             X_WO = brick_pose(self.scene, self.data)
         X_WO_goal = goal.X_WO_goal
-        end = self.task.trajectory.end_time
+        end = self.plan_start + self._plan.trajectory.end_time
+        recovery = self.task.recovery
         return RunResult(
             scenario=self.task.scenario,
             controller=self.controller.name,
@@ -574,6 +651,7 @@ class Simulation:
             planning=self.task.planning,
             robot=self.scene.robot.name,
             parameters=self.task.parameters,
+            attempts=None if recovery is None else recovery.attempts(),
         )
 
 

@@ -28,6 +28,7 @@ from pickplace.planning.trajectory import PoseTrajectory
 from pickplace.sim import faults
 from pickplace.sim.catalog import CATALOG, ScenarioInfo
 from pickplace.sim.goals import PlaceGoal, ReachGoal
+from pickplace.sim.recovery import Reattempt
 from pickplace.sim.task import Fault, Task
 from pickplace.world.placements import (
     BrickPlacement,
@@ -58,6 +59,9 @@ class BuildRequest:
         brick: Brick start pose override, or None.
         controller: The run's controller (the planner's pre-flight runs it).
         timing: How the planner times plans by the robot (``--speed`` is its ``speed``).
+        attempts: Most attempts a pick-and-place run may take (``--attempts``): after a
+            missed grasp or a drop it plans again from where the brick rests
+            (:mod:`pickplace.sim.recovery`); 1: the first failure ends the run.
     """
 
     scene: Scene
@@ -66,6 +70,7 @@ class BuildRequest:
     brick: BrickPlacement | None = None
     controller: str = "qp"
     timing: TimingConfig = field(default_factory=TimingConfig)
+    attempts: int = 1
 
     def planner(self) -> PickPlacePlanner:
         """A planner for this request's scene, controller and timing."""
@@ -84,7 +89,9 @@ def pick_place_task(
 
     With ``preflight`` the planner's candidates are pre-flighted and the first feasible one is
     the task's plan (the task records them all; none feasible: the run ends before any
-    physics). Without it, the first candidate is executed unchecked.
+    physics). Without it, the first candidate is executed unchecked. The task's recovery
+    (:class:`~pickplace.sim.recovery.Reattempt`) plans again with the same planner, up to
+    ``req.attempts`` attempts.
     """
     scene = req.scene
     X_WO_pick = brick_on_floor(scene, placement, scene.source_bin.floor_top_z)
@@ -93,6 +100,7 @@ def pick_place_task(
     )
     planner = planner or req.planner()
     report = planner.plan(X_WO_pick, X_WO_place) if preflight else None
+    chosen = None if report is None or report.chosen is None else report.candidates[report.chosen]
     return Task(
         scenario=req.scenario,
         seed=req.seed,
@@ -101,6 +109,9 @@ def pick_place_task(
         X_WO_start=X_WO_pick,
         faults=tuple(fault_list),
         planning=report,
+        recovery=Reattempt(
+            planner, X_WO_place, req.attempts, None if chosen is None else chosen.label
+        ),
     )
 
 
