@@ -407,7 +407,6 @@ class Simulation:
         target = None if ticks is None else self.ticks + ticks
         settle_ticks = round(self.criteria.settle_time / self.dt)
         goal, scene, data, criteria = self.task.goal, self.scene, self.data, self.criteria
-        nonfinite = self.log.nonfinite
         # MuJoCo's warnings become events instead of lines in ./MUJOCO_LOG.TXT.
         previous_handler = mujoco.get_mju_user_warning()
         mujoco.set_mju_user_warning(self._on_mujoco_warning)
@@ -420,8 +419,9 @@ class Simulation:
                     break
                 end = self.plan_start + self._plan.trajectory.end_time
                 end_tick = int(np.ceil(end / self.dt - 1e-9))
+                nonfinite = self.log.nonfinite  # the log may have grown with a new plan
                 k0 = self.ticks
-                k1 = self._command_ticks(k0, min(k0 + self.block_ticks, limit))
+                k1 = self._command_ticks(k0, self._block_end(k0, limit))
                 for k in range(k0, k1):
                     failed_and_shown = self._stop_tick is not None and k >= self._stop_tick
                     settled = k > end_tick and (
@@ -444,6 +444,21 @@ class Simulation:
                 self._plan_replaced = False
         finally:
             mujoco.set_mju_user_warning(previous_handler)
+
+    def _block_end(self, k0: int, limit: int) -> int:
+        """End of the block starting at ``k0``: :attr:`block_ticks` later, at most ``limit``,
+        and ended early at the tick whose end reaches the next decision time of the task's
+        recovery (:meth:`~pickplace.sim.task.Recovery.next_decision_time`), so that it can act
+        right after that tick. Blocks of any length give the same run."""
+        end = min(k0 + self.block_ticks, limit)
+        recovery = self.task.recovery
+        if recovery is not None and self.failure is None:
+            t = recovery.next_decision_time(self)
+            if t is not None:
+                k = math.ceil(t / self.dt - 1e-9)  # tick k - 1 ends at k·dt >= t
+                if k0 < k < end:
+                    end = k
+        return end
 
     def _command_ticks(self, k0: int, k1: int) -> int:
         """Plan sample and IK for ticks ``[k0, k1)``, from ``q_cmd`` at ``k0``.

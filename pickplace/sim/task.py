@@ -101,6 +101,10 @@ class Recovery(Protocol):
         takes them up (they are not the run's; the run goes on, on a plan the recovery has put
         in place), False if the first of them ends the run as usual."""
 
+    def next_decision_time(self, run: RunControl) -> float | None:
+        """The next run time [s] after whose tick the recovery wants the block to end, so that
+        it can act at once (e.g. when the grasp is judged), or None."""
+
     def after_block(self, run: RunControl) -> Failure | None:
         """After every assessed block while no failure ended the run: may replace the plan;
         returns a failure that ends the run now (e.g. a failure taken up that cannot be
