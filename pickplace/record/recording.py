@@ -33,6 +33,10 @@ Entity path                                        Contents
                                                    show one label, "pick / settle / ...")
 ``world/plan/target_bin``                          static: target bin's free inner volume
                                                    (green box outline)
+``world/plan/replans/<n>/path``                    from the moment the n-th plan replaced the
+                                                   one executed (a ``replan`` event): its tool
+                                                   path, orange for the stop after a failed
+                                                   attempt, green for the next attempt's plan
 ``world/tool/planned``                             per tick: planned tool pose, 12 cm axes
 ``world/tool/commanded``                           per tick: FK of the commanded q, 9 cm axes
 ``world/tool/actual``                              per tick: simulated tool pose, 6 cm axes
@@ -225,6 +229,7 @@ class Recorder:
         self._verdict_logged = False
         self._early_events: list[Event] = []
         self._moving: list[tuple[int, str]] = []  # (body id, entity path)
+        self._replans = 0  # plans that replaced another (world/plan/replans/<n>)
         self._ik_status_names = ", ".join(f"{i} {s}" for i, s in enumerate(IK_STATUSES))
 
     # ------------------------------------------------------------------ lifecycle
@@ -411,6 +416,8 @@ class Recorder:
         self._log_event(event.tick, event.t, event.level, event.text)
         if event.kind is EventKind.VERDICT:
             self._verdict_logged = True
+        elif event.kind is EventKind.REPLAN:
+            self._log_replan(run, event)
 
     def on_finish(self, run: Simulation, result: RunResult) -> None:
         """Send the rest of the log, the summary and the verdict, close the stream and put the
@@ -559,6 +566,24 @@ class Recorder:
             static=True,
         )
         self._log_rejected(run)
+
+    def _log_replan(self, run: Simulation, event: Event) -> None:
+        """The plan that has just replaced the one executed: its tool path, from the event's
+        time on (a plan carrying nothing, the stop after a failed attempt, in orange)."""
+        self._replans += 1
+        plan = run.plan
+        colour = [1.0, 0.55, 0.1] if plan.phases is None else [0.2, 0.85, 0.35]
+        self.rec.set_time("sim_time", duration=to_duration(np.array([event.t]))[0])
+        self.rec.set_time("tick", sequence=int(event.tick))
+        self.rec.log(
+            f"world/plan/replans/{self._replans}/path",
+            rr.LineStrips3D(
+                [plan.trajectory.sample_path(200)],
+                colors=[colour],
+                radii=[0.003],
+                labels=[f"plan {self._replans + 1} from t={event.t:.2f} s"],
+            ),
+        )
 
     def _log_rejected(self, run: Simulation) -> None:
         """Each candidate plan the planner rejected: its path, thin and grey, and a red marker
