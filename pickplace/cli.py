@@ -283,7 +283,8 @@ def _add_attempts(parser: argparse.ArgumentParser) -> None:
         type=_positive_int,
         default=1,
         metavar="N",
-        help="most attempts of a run, 1 to 10 (default: 1): after a missed grasp or a drop the "
+        help="most attempts of a run, 1 to 10 (default: 1; or --vary attempts=a,b): after a "
+        "missed grasp or a drop the "
         "arm stops, the brick is left to rest and the run plans again from where it lies",
     )
 

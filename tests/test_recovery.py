@@ -287,3 +287,19 @@ def test_a_recording_shows_each_plan_from_the_moment_it_replaced_the_last(
     for n, event in enumerate(replans, 1):
         entity = ents[f"world/plan/replans/{n}/path"]
         assert entity.rows["tick"] == [event.tick]
+
+
+def test_attempts_can_be_varied_as_a_grid_of_whole_numbers() -> None:
+    from pickplace.sim.vary import parse_vary
+
+    plan = parse_vary(["attempts=1,3"])
+    draws = [plan.draw(seed) for seed in (0, 1)]
+    assert [RunRequest(seed=i, parameters=d).run_attempts for i, d in enumerate(draws)] == [1, 3]
+    _, task, _ = prepare(RunRequest(scenario="fault-brick-moved", seed=1, parameters=draws[1]))
+    assert isinstance(task.recovery, Reattempt) and task.recovery.max_attempts == 3
+    with pytest.raises(InvalidInputError, match="whole numbers in"):
+        parse_vary(["attempts=1,2.5"])
+    with pytest.raises(InvalidInputError, match="grid of values only"):
+        parse_vary(["attempts=1:3"])
+    with pytest.raises(InvalidInputError, match="given and also varied"):
+        prepare(RunRequest(seed=1, parameters=draws[1], attempts=2))

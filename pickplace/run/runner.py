@@ -114,6 +114,12 @@ class RunRequest:
         return self.speed if drawn is None else drawn
 
     @property
+    def run_attempts(self) -> int:
+        """The most attempts the run takes: the drawn ``attempts``, else :attr:`attempts`."""
+        drawn = self.parameters.get("attempts") if self.parameters is not None else None
+        return self.attempts if drawn is None else int(drawn)
+
+    @property
     def run_control_rate_hz(self) -> float:
         """The control rate [Hz] asked for: the drawn ``control_rate``, else
         :attr:`control_rate_hz`."""
@@ -360,6 +366,10 @@ def _validate_parameters(req: RunRequest, draw: ParameterDraw) -> None:
         raise InvalidInputError(
             "the speed is given and also varied; give one of them", field="speed"
         )
+    if "attempts" in draw.values and req.attempts != 1:
+        raise InvalidInputError(
+            "the attempts are given and also varied; give one of them", field="attempts"
+        )
     if "control_rate" in draw.values and req.control_rate_hz != 100.0:
         raise InvalidInputError(
             "the control rate is given and also varied; give one of them",
@@ -450,7 +460,7 @@ def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, T
             req.brick,
             controller=req.controller,
             timing=TimingConfig(speed=req.run_speed),
-            attempts=req.attempts,
+            attempts=req.run_attempts,
         )
     )
     if req.parameters is not None:  # after planning: what the plan must not know

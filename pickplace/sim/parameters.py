@@ -27,6 +27,7 @@ class Parameter:
         high: Largest valid value.
         meaning: What the value is, in one line.
         grid_only: Whether only a grid of values is allowed (a discrete parameter).
+        whole: Whether its values must be whole numbers (a count).
     """
 
     name: str
@@ -35,6 +36,7 @@ class Parameter:
     high: float
     meaning: str
     grid_only: bool = False
+    whole: bool = False
 
     def __post_init__(self) -> None:
         """Check that the bounds are finite and ordered."""
@@ -46,7 +48,7 @@ class Parameter:
 
     def describe(self) -> str:
         """``name [unit] in [low, high]``, as listed in error messages."""
-        grid = ", grid only" if self.grid_only else ""
+        grid = (", grid only" if self.grid_only else "") + (", whole" if self.whole else "")
         return f"{self.name} [{self.unit}] in [{self.low:g}, {self.high:g}]{grid}"
 
 
@@ -83,6 +85,15 @@ PARAMETERS: dict[str, Parameter] = {
             *_CONTROL_RATE_HZ,
             "IK rate; must divide the physics rate (100, 125, 250, 500 Hz at 2 ms steps)",
             grid_only=True,
+        ),
+        Parameter(
+            "attempts",
+            "-",
+            1.0,
+            10.0,
+            "most attempts of a run: after a missed grasp or a drop it plans again (whole numbers)",
+            grid_only=True,
+            whole=True,
         ),
     )
 }

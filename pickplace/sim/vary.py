@@ -22,6 +22,8 @@ name              unit   valid            meaning
                                           long along the same path
 ``control_rate``  Hz     [100, 1000]      IK rate; grid only (a rate must divide the physics
                                           rate, e.g. 100, 125, 250, 500 Hz at 2 ms steps)
+``attempts``      -      1 … 10           most attempts of a run (``--attempts``); grid of
+                                          whole numbers only
 ================  =====  ===============  ====================================================
 
 How values are drawn for the trial with seed ``s``:
@@ -125,6 +127,12 @@ class VarySpec:
             if not (math.isfinite(v) and p.low <= v <= p.high):
                 raise InvalidInputError(
                     f"--vary {p.name}: {p.name} [{p.unit}] must lie in [{p.low:g}, {p.high:g}] "
+                    f"({p.meaning}); got {v:g}"
+                )
+        for v in self.values if p.whole else ():
+            if not float(v).is_integer():
+                raise InvalidInputError(
+                    f"--vary {p.name}: {p.name} takes whole numbers in [{p.low:g}, {p.high:g}] "
                     f"({p.meaning}); got {v:g}"
                 )
 
