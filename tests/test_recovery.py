@@ -303,3 +303,13 @@ def test_attempts_can_be_varied_as_a_grid_of_whole_numbers() -> None:
         parse_vary(["attempts=1:3"])
     with pytest.raises(InvalidInputError, match="given and also varied"):
         prepare(RunRequest(seed=1, parameters=draws[1], attempts=2))
+
+
+def test_the_verdict_panel_names_the_final_outcome_and_each_replan() -> None:
+    from pickplace.record.recording import run_verdict
+
+    sim, result = _run("fault-gripper-disabled", 2)
+    verdict = run_verdict(result, sim.dt)
+    assert verdict.reason == "missed-grasp" and verdict.tick == result.failure_tick
+    (replan,) = result.summary()["replans"]
+    assert f"Replanned at t={replan['t']:.2f} s after missed-grasp: attempt 2." in verdict.text

@@ -127,19 +127,23 @@ def run_verdict(result: RunResult, dt: float) -> RunVerdict:
         result: The finished run.
         dt: Control period [s].
     """
+    s = result.summary()
+    replans = "".join(
+        f" Replanned at t={r['t']:.2f} s after {r['after']}: attempt {r['attempt']}."
+        for r in s["replans"]
+    )
     if result.success:
-        s = result.summary()
         place = s.get("place_error_m")
         text = (
             (f"Brick placed {place * 1000:.1f} mm from its target; " if place is not None else "")
             + f"max tool position error {s['max_position_error_m'] * 1000:.1f} mm, max joint "
             f"speed / limit {s['max_joint_speed_ratio']:.3f}, min singular value "
-            f"{s['min_singular_value']:.3f}."
+            f"{s['min_singular_value']:.3f}." + replans
         )
         return RunVerdict(True, None, text, result.ticks, result.sim_time_s, dt)
     text = result.failure_text or str(result.failure)
     reason = str(result.failure)
-    text = text.removeprefix(f"{reason}: ")
+    text = text.removeprefix(f"{reason}: ") + (f" ({replans.strip()})" if replans else "")
     tick = result.failure_tick if result.failure_tick is not None else result.ticks
     t = result.failure_time_s if result.failure_time_s is not None else result.sim_time_s
     return RunVerdict(False, reason, text, tick, t, dt)
