@@ -313,3 +313,14 @@ def test_the_verdict_panel_names_the_final_outcome_and_each_replan() -> None:
     assert verdict.reason == "missed-grasp" and verdict.tick == result.failure_tick
     (replan,) = result.summary()["replans"]
     assert f"Replanned at t={replan['t']:.2f} s after missed-grasp: attempt 2." in verdict.text
+
+
+def test_a_start_is_checked_when_made(scene: Scene) -> None:
+    from mink.lie import SE3
+
+    X = SE3.identity()
+    assert Start([0.1] * 7, X).q.dtype == np.float64
+    with pytest.raises(PlanError, match="finite"):
+        Start(np.array([np.nan] * 7), X)
+    with pytest.raises(PlanError):
+        Start(np.zeros(7), SE3(wxyz_xyz=np.array([2.0, 0, 0, 0, 0, 0, 0])))

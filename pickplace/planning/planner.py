@@ -25,6 +25,11 @@ smaller wrist travel (the nearest yaw, as every plan chose before candidates exi
 none is, the report says so, with each pre-flighted candidate's first problem; if none passed
 1 and 2, with the best-ranked candidate's cheap-test problem.
 
+A plan starts at the home posture unless given a :class:`Start` (the configuration and tool
+pose where the arm stopped, when a run tries again: :mod:`pickplace.sim.recovery`); its
+candidates then start at that pose, the wrist's margin is predicted from that configuration
+and the pre-flight runs from it.
+
 Every candidate's clearance via-point turns with the base swing (``via="swing"``, see
 :func:`pickplace.planning.plan.plan_pick_place`).
 
@@ -45,6 +50,8 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
+from pickplace.errors import PlanError
+from pickplace.geometry import require_pose
 from pickplace.planning.candidates import (
     GRAVITY,
     GraspCandidate,
@@ -211,6 +218,19 @@ class Start:
 
     q: np.ndarray
     X_WG: SE3
+
+    def __post_init__(self) -> None:
+        """Check the pose (a unit quaternion, finite) and that ``q`` is finite angles, copied;
+        the planner checks that there is one per arm joint.
+
+        Raises:
+            PlanError: Either is invalid.
+        """
+        require_pose("start X_WG", self.X_WG)
+        q = np.array(self.q, dtype=np.float64).reshape(-1)
+        if not np.all(np.isfinite(q)):
+            raise PlanError(f"a start configuration must be finite [rad], got {q.tolist()!r}")
+        object.__setattr__(self, "q", q)
 
 
 @dataclass(frozen=True)

@@ -284,7 +284,7 @@ class Reattempt:
         t_stop = stop_time(run, self.config)
         plan = run.plan
         width0 = float(run.log.gripper_cmd[k])
-        width_open = max(width0, *(k.gripper_width for k in plan.trajectory.keyframes))
+        width_open = max(width0, *(kf.gripper_width for kf in plan.trajectory.keyframes))
         t0 = k * dt - run.plan_start
         cfg = self.config
         z_stopped = float(plan.trajectory.sample(t0 + 0.5 * t_stop)[0][6])
@@ -295,6 +295,17 @@ class Reattempt:
         )
         current = self._attempts[-1]
         text = f"{failure.reason.value}: {failure.text}"
+        try:
+            run.replace_plan(
+                Plan(stop),
+                k * dt,
+                f"attempt {current.number} of {self.max_attempts} failed at t="
+                f"{(failure.tick + 1) * dt:.2f} s ({text}); the arm stops along its path over "
+                f"{t_stop:.2f} s, the gripper opening, backs off {rise * 1000:.0f} mm up and "
+                "waits for the brick to rest",
+            )
+        except InvalidInputError:  # the run's log would pass its memory bound
+            return False
         self._attempts[-1] = Attempt(
             current.number,
             current.start_tick,
@@ -305,14 +316,6 @@ class Reattempt:
             (failure.tick + 1) * dt,
             text,
             run.ticks,
-        )
-        run.replace_plan(
-            Plan(stop),
-            k * dt,
-            f"attempt {current.number} of {self.max_attempts} failed at t="
-            f"{(failure.tick + 1) * dt:.2f} s ({text}); the arm stops along its path over "
-            f"{t_stop:.2f} s, the gripper opening, backs off {rise * 1000:.0f} mm up and waits "
-            "for the brick to rest",
         )
         self._stop, self._taken = stop, failure
         return True
@@ -367,15 +370,18 @@ class Reattempt:
         chosen = report.candidates[report.chosen]
         number = len(self._attempts) + 1
         p = X_WO.translation()
+        try:
+            run.replace_plan(
+                report.plan,
+                run.ticks * run.dt,
+                f"attempt {number} of {self.max_attempts}: plan '{chosen.label}' (candidate "
+                f"{report.chosen + 1} of {len(report.candidates)}) picks the brick where it "
+                f"rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m",
+            )
+        except InvalidInputError as exc:  # the run's log would pass its memory bound
+            return self._give_up(taken, str(exc))
         self._attempts.append(Attempt(number, run.ticks, run.ticks * run.dt, chosen.label))
         self._stop = self._taken = None
-        run.replace_plan(
-            report.plan,
-            run.ticks * run.dt,
-            f"attempt {number} of {self.max_attempts}: plan '{chosen.label}' (candidate "
-            f"{report.chosen + 1} of {len(report.candidates)}) picks the brick where it rests, "
-            f"at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m",
-        )
         return None
 
     def _brick_ready(self, run: RunControl) -> tuple[bool, str]:
