@@ -324,3 +324,17 @@ def test_a_start_is_checked_when_made(scene: Scene) -> None:
         Start(np.array([np.nan] * 7), X)
     with pytest.raises(PlanError):
         Start(np.zeros(7), SE3(wxyz_xyz=np.array([2.0, 0, 0, 0, 0, 0, 0])))
+
+
+def test_a_sweep_counts_the_trials_that_replanned() -> None:
+    from pickplace.sim.vary import VaryPlan
+    from pickplace.sweep.report import outcome_report
+
+    trials = [
+        {"seed": 0, "success": True, "attempts": 2, "failure": None},
+        {"seed": 1, "success": False, "attempts": 3, "failure": "missed-grasp"},
+        {"seed": 2, "success": True, "attempts": 1, "failure": None},
+        {"seed": 3, "success": False, "failure": "worker-died", "lost": True},
+    ]
+    report = outcome_report(trials, {}, VaryPlan())
+    assert report["replanned"] == {"trials": 2, "successes": 1}
