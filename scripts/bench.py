@@ -41,12 +41,12 @@ import mink
 import mujoco
 import numpy as np
 
+from pickplace.cache import CACHE_ENV
 from pickplace.control.controllers import QPController, make_controller
 from pickplace.errors import InvalidInputError
 from pickplace.geometry import pose_error_W
 from pickplace.planning.planner import PickPlacePlanner
 from pickplace.planning.timing import cycle_time_at_speed_limits, cycle_time_bound
-from pickplace.robot import calibration_cache
 from pickplace.robot.compose import clear_calibration_cache
 from pickplace.robot.registry import bundled_robots
 from pickplace.run.runner import RunRequest, prepare
@@ -298,9 +298,9 @@ def compose_times() -> dict[str, float]:
     worker pays). The disk cache is a temporary directory, so the user's is not touched."""
     load_scene()  # imports and first-call costs outside the measurement
     out = {}
-    saved = os.environ.get(calibration_cache.CACHE_ENV)
+    saved = os.environ.get(CACHE_ENV)
     with tempfile.TemporaryDirectory() as cache:
-        os.environ[calibration_cache.CACHE_ENV] = cache
+        os.environ[CACHE_ENV] = cache
         try:
             for name in bundled_robots():
                 clear_scene_cache()
@@ -318,9 +318,9 @@ def compose_times() -> dict[str, float]:
                 out[f"robot_compose_cached_s_{name}"] = float(second.stdout.split()[-1])
         finally:
             if saved is None:
-                os.environ.pop(calibration_cache.CACHE_ENV, None)
+                os.environ.pop(CACHE_ENV, None)
             else:
-                os.environ[calibration_cache.CACHE_ENV] = saved
+                os.environ[CACHE_ENV] = saved
     return out
 
 
