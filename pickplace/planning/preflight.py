@@ -219,6 +219,7 @@ class Preflight:
         X_WO_end = X_WO_goal if X_WO_goal is not None else X_WO_start
         pair_kind = self._pair_kinds(X_WO_start, X_WO_end)
         command, sample = self.controller.command, traj.sample
+        set_width = self.controller.set_gripper_width
         check_plan_duration(traj.end_time)
         n = math.floor(traj.end_time / dt + 1e-9) + 1
         times = np.arange(n) * dt
@@ -238,6 +239,7 @@ class Preflight:
             x, V, width = sample(t)
             if midpoint:  # the plan's velocity at the middle of the tick
                 V = sample(t + half_dt)[1]
+            set_width(width if width > width_held else width_held)  # as the loop does
             res = command(q, x, V)
             q_path[i], qdot_path[i], J_path[i] = q, res.qdot, res.J_WG
             is_held = held is not None and held[0] <= t < held[1]
