@@ -10,6 +10,8 @@ and returns the joint velocities q̇ [rad/s] that realise it, with a status:
 - ``qp``   (default): mink's FrameTask + PostureTask + ConfigurationLimit + VelocityLimit solved
   with daqp (differential IK as a QP with velocity limits, as in Drake's DiffIK). Never exceeds
   the joint speed limits.
+  With mink's CollisionAvoidanceLimit between the robot's geoms and the world's
+  (:mod:`pickplace.control.collision`); ``qp-no-collision`` is the same without it.
 - ``pinv``: q̇ = J⁺ V_cmd with an SVD pseudo-inverse whose singular values below a cutoff are
   treated as zero (the lecture's pseudo-inverse controller). Not clipped: near a singularity it
   asks for huge speeds.
@@ -22,6 +24,7 @@ controllers").
 from __future__ import annotations
 
 import copy
+import dataclasses
 import enum
 import math
 from abc import ABC, abstractmethod
@@ -686,8 +689,27 @@ class QPController(DiffIKController):
         return qdot, status
 
 
+class QPNoCollisionController(QPController):
+    """The ``qp`` controller with its collision limit off (:attr:`QPWeights.collision_limit`
+    False): the same tasks, joint limits and speed limits, nothing kept from the world. A name
+    of its own, so that the planner's pre-flight runs it too and a sweep can compare it
+    (``--compare controller=qp,qp-no-collision``).
+
+    Args:
+        weights: As :class:`QPController`'s; their ``collision_limit`` is set False.
+    """
+
+    name = "qp-no-collision"
+
+    def __init__(
+        self, scene: Scene, dt: float, weights: QPWeights | None = None, **kwargs: object
+    ) -> None:
+        off = dataclasses.replace(weights or QPWeights(), collision_limit=False)
+        super().__init__(scene, dt, weights=off, **kwargs)  # type: ignore[arg-type]
+
+
 CONTROLLERS: dict[str, type[DiffIKController]] = {
-    c.name: c for c in (QPController, PinvController, DLSController)
+    c.name: c for c in (QPController, QPNoCollisionController, PinvController, DLSController)
 }
 
 
