@@ -713,6 +713,12 @@ CONTROLLERS: dict[str, type[DiffIKController]] = {
 }
 
 
+def without_collision_limit(name: str) -> str:
+    """The name of controller ``name`` without a collision limit: ``qp`` → ``qp-no-collision``;
+    any other name is returned as it is (unknown names are left to :func:`make_controller`)."""
+    return QPNoCollisionController.name if name == QPController.name else name
+
+
 def make_controller(name: str, scene: Scene, dt: float, **kwargs: object) -> DiffIKController:
     """Build the controller called ``name`` (one of :data:`CONTROLLERS`).
 
