@@ -272,20 +272,19 @@ class QPWeights:
             CollisionAvoidanceLimit (:mod:`pickplace.control.collision`).
         collision_min_distance: Distance the collision limit keeps between a robot geom and a
             fixed world geom (floor, bins) [m]: 2 mm, below the pre-flight's 5 mm clearance,
-            so a plan the pre-flight passed (fingers 10 mm over a bin floor at the pick) is
+            so a plan the pre-flight passed (fingers 8 mm over a bin floor at the pick) is
             never held back by it.
         collision_detection_distance: Fixed-world pairs closer than this get a constraint
             row [m]: 30 mm, more than d_min plus a tick's approach at the fastest robot
-            surface speed of the plans (under 2.5 m/s at 100 Hz: 25 mm), so a pair is seen
-            before it is within d_min.
-        moving_min_distance: Distance kept from the world's moving bodies (mocap bodies:
-            an obstacle a fault puts in the path during the run) [m]: 20 mm. The plan never
-            came near them, so nothing the plan needs is held back, and the commanded arm
-            stopping short of one in a few ticks leaves the physical arm, which lags the
-            command, a few mm behind it (measured in docs/physics-notes.md, "The collision
-            limit"), clear.
+            surface of the bundled robots' nominal runs (1.5 m/s, 15 mm a tick at 100 Hz),
+            so a pair is seen before it is within d_min.
+        moving_min_distance: Distance kept from the world's moving bodies (mocap bodies: an
+            obstacle a fault puts in the path during the run) [m]: 20 mm. The plan never came
+            near them, so nothing the plan needs is held back, and the physical arm, which
+            lags a command stopped within a few ticks by 5–15 mm (docs/physics-notes.md,
+            "The collision limit"), stays clear of it.
         moving_detection_distance: Moving-body pairs closer than this get a row [m]: 50 mm,
-            d_min plus a tick's approach at 2.5 m/s, and a few mm.
+            d_min plus a tick's approach at 1.5 m/s and as much again.
         collision_gain: Fraction of the distance in excess of d_min that a tick may close
             [-], in (0, 1] (mink's default value, here per tick): the excess shrinks to 15 %
             a tick. 0.5 braked the planner's path sweep (20 mm a tick) on its descent to the

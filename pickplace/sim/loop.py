@@ -4,7 +4,9 @@ Each control tick (``SimConfig.control_rate_hz``, default 100 Hz):
 
 1. read the planned tool pose X_WG(t), its spatial velocity V_WG(t) and the gripper width;
 2. the controller turns them into joint velocities at the commanded configuration q_cmd;
-3. q_cmd is integrated from those velocities and sent to the arm's position actuators;
+3. q_cmd is integrated from those velocities and sent to the arm's position actuators (the
+   controller sees the world's mocap poses and the fingers' commanded gap: its collision
+   limit keeps the robot clear of the world);
 4. MuJoCo steps the physics for one control period at the scene's timestep;
 5. the commands, the IK's Jacobian and MuJoCo's state are copied into the tick log
    (:class:`~pickplace.sim.ticklog.TickLog`).
@@ -346,10 +348,12 @@ class Simulation:
 
         Works block by block: the commands of a block's ticks (:meth:`_command_ticks`), then
         its physics tick by tick (:meth:`_physics_tick`), then :meth:`assess`. The IK never
-        reads the simulated state (it integrates q_cmd open loop, like Drake's
-        DifferentialInverseKinematicsIntegrator, and faults act on the world only), so this
-        order gives exactly the run that interleaving IK and physics tick by tick gives,
-        while each phase keeps its own code and data in the CPU's caches.
+        reads the robot's simulated state (it integrates q_cmd open loop, like Drake's
+        DifferentialInverseKinematicsIntegrator, and faults act on the world only); of the
+        world it sees the mocap poses, handed over at a block's start, and a tick whose
+        faults move one ends its block. So this order gives exactly the run that
+        interleaving IK and physics tick by tick gives, while each phase keeps its own code
+        and data in the CPU's caches.
 
         Raises:
             InvalidInputError: ``ticks`` is negative.
