@@ -9,6 +9,9 @@ from mink.lie import SE3
 
 from pickplace.control.collision import Clearance, GripperBodies, collision_geoms
 from pickplace.control.controllers import ControllerError, IKStatus, QPController, QPWeights
+from pickplace.robot.registry import DEFAULT_ROBOT, bundled_robots
+from pickplace.run.runner import RunRequest, execute
+from pickplace.sim.checks import FailureReason
 from pickplace.world.scene import Scene
 
 DT = 0.01
@@ -154,3 +157,18 @@ def test_pairs_leave_out_the_base_and_the_brick_and_bad_settings_are_refused(
         Clearance(-0.001, 0.01)
     with pytest.raises(ControllerError, match=r"valid: \(0, 1\]"):
         QPWeights(collision_gain=1.5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", bundled_robots())
+def test_fault_obstacle_with_qp_never_touches_the_box(robot: str) -> None:
+    """Every bundled robot: the box moved into the transfer path is never touched with qp
+    (the tool falls behind the plan instead); without the limit the arm hits it."""
+    with_limit = execute(RunRequest(scenario="fault-obstacle", robot=robot)).result
+    assert with_limit.failure is FailureReason.IK_FAILED
+    assert with_limit.metrics["max_robot_world_contact_force_n"] == 0.0
+    if robot == DEFAULT_ROBOT:
+        free = execute(
+            RunRequest(scenario="fault-obstacle", robot=robot, controller="qp-no-collision")
+        ).result
+        assert free.failure is FailureReason.COLLISION
