@@ -32,9 +32,9 @@ plane, lies farther than D above it. Those pairs are farther than D apart, where
 phase (``mj_geomDistance`` capped at D) gives no row, so the rows are exactly mink's; only the
 survivors get ``mj_geomDistance`` and a Jacobian. Measured on the nominal run's states (iiwa,
 133 pairs, a shared 2-core machine): this broad phase 13 µs, with the rows 15 µs; mink's
-own (bounding spheres, then its rows) 42–48 µs. MuJoCo's ``mj_collision`` with margins would cost 4 µs but is no broad
-phase for this: its box–box narrow phase misses pairs well within its margin (a pad 28 mm from
-a bin floor, margin 60 mm).
+own (bounding spheres, then its rows) 42–48 µs. MuJoCo's ``mj_collision`` with margins would
+cost 4 µs but is no broad phase for this: its box–box narrow phase misses pairs well within
+its margin (a pad 28 mm from a bin floor, margin 60 mm).
 """
 
 from __future__ import annotations
