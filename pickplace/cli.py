@@ -140,7 +140,7 @@ def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
         default="pick-place",
         help="scenario name (default: pick-place; see pickplace scenarios)",
     )
-    p.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    p.add_argument("--controller", default="qp", help="qp (default), qp-no-collision, pinv or dls")
     p.add_argument(
         "--seed", type=_seed, default=0, help="seed of randomised scenarios (default: 0)"
     )
@@ -207,7 +207,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="pick-place-random",
         help="scenario name (default: pick-place-random; see pickplace scenarios)",
     )
-    sweep.add_argument("--controller", default=None, help="qp (default), pinv or dls")
+    sweep.add_argument(
+        "--controller", default=None, help="qp (default), qp-no-collision, pinv or dls"
+    )
     sweep.add_argument("--robot", default=None, help=ROBOT_HELP)
     sweep.add_argument(
         "--trials", type=_positive_int, default=20, help="number of trials (default: 20)"

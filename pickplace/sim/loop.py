@@ -4,7 +4,9 @@ Each control tick (``SimConfig.control_rate_hz``, default 100 Hz):
 
 1. read the planned tool pose X_WG(t), its spatial velocity V_WG(t) and the gripper width;
 2. the controller turns them into joint velocities at the commanded configuration q_cmd;
-3. q_cmd is integrated from those velocities and sent to the arm's position actuators;
+3. q_cmd is integrated from those velocities and sent to the arm's position actuators (the
+   controller sees the world's mocap poses and the fingers' commanded gap: its collision
+   limit keeps the robot clear of the world);
 4. MuJoCo steps the physics for one control period at the scene's timestep;
 5. the commands, the IK's Jacobian and MuJoCo's state are copied into the tick log
    (:class:`~pickplace.sim.ticklog.TickLog`).
@@ -44,7 +46,7 @@ import numpy as np
 
 from pickplace.control.controllers import IK_STATUSES, DiffIKController, IKStatus
 from pickplace.errors import ControllerError, InvalidInputError, require_positive
-from pickplace.planning.plan import Plan
+from pickplace.planning.plan import Plan, grasp_width
 from pickplace.planning.planner import PlanningReport
 from pickplace.sim.checks import Check, CheckContext, Failure, FailureReason, SuccessCriteria
 from pickplace.sim.events import Event, EventKind
@@ -214,6 +216,14 @@ class Simulation:
         self._plan_replaced = False  # in the block being assessed
         self._sample = task.plan.trajectory.sample
         self._command = controller.command
+        self._set_width = controller.set_gripper_width
+        # The IK sees the fingers at the commanded gap, never narrower than the grasped brick
+        # (closed on it they stop there), as the pre-flight does.
+        self._width_held = grasp_width(task.plan, scene)
+        # The world's moving bodies as the IK last saw them (see _world_moved).
+        self._seen_mocap_pos = self.data.mocap_pos.copy()
+        self._seen_mocap_quat = self.data.mocap_quat.copy()
+        self._has_mocap = self.model.nmocap > 0
 
         self.max_ticks = self._horizon_ticks(task.plan, 0.0)
         _check_log_size(scene, self.max_ticks, self.dt)
@@ -394,10 +404,12 @@ class Simulation:
 
         Works block by block: the commands of a block's ticks (:meth:`_command_ticks`), then
         its physics tick by tick (:meth:`_physics_tick`), then :meth:`assess`. The IK never
-        reads the simulated state (it integrates q_cmd open loop, like Drake's
-        DifferentialInverseKinematicsIntegrator, and faults act on the world only), so this
-        order gives exactly the run that interleaving IK and physics tick by tick gives,
-        while each phase keeps its own code and data in the CPU's caches.
+        reads the robot's simulated state (it integrates q_cmd open loop, like Drake's
+        DifferentialInverseKinematicsIntegrator, and faults act on the world only); of the
+        world it sees the mocap poses, handed over at a block's start, and a tick whose
+        faults move one ends its block. So this order gives exactly the run that
+        interleaving IK and physics tick by tick gives, while each phase keeps its own code
+        and data in the CPU's caches.
 
         Raises:
             InvalidInputError: ``ticks`` is negative.
@@ -435,6 +447,8 @@ class Simulation:
                     if nonfinite[k] != FINITE:
                         stopped = True
                         break
+                    if self._has_mocap and self._world_moved():
+                        break  # the next ticks' commands must see the moved world
                 # Commands past the last simulated tick are dropped.
                 if self.ticks > k0:
                     self.q_cmd = self.log.q_cmd[self.ticks - 1].copy()
@@ -468,6 +482,10 @@ class Simulation:
         motion and is the last one simulated). The gripper's commands for the planned widths
         are computed for the whole block at once.
         """
+        v = self._views
+        self._seen_mocap_pos[:] = v.mocap_pos
+        self._seen_mocap_quat[:] = v.mocap_quat
+        self.controller.observe_world(v.mocap_pos, v.mocap_quat)
         end = self._arm_commands(k0, k1)
         log = self.log
         log.gripper_ctrl[k0:end] = self._ctrl_for_widths(log.gripper_cmd[k0:end])
@@ -480,12 +498,14 @@ class Simulation:
         segment_index = self._plan.trajectory.segment_index
         t_start = self.plan_start
         dynamics = self._dynamics if self._use_dynamics else None
+        set_width, width_held = self._set_width, self._width_held
         q_cmd = self.q_cmd
         qdot_prev = log.qdot_cmd[k0 - 1] if k0 > 0 else self._zero_qdot
         for k in range(k0, k1):
             t = k * dt - t_start  # the plan's clock
             x_plan, V_plan, width = sample(t)
             t0 = time.perf_counter_ns()
+            set_width(width if width > width_held else width_held)
             res = command(q_cmd, x_plan, V_plan)
             log.ik_us[k] = (time.perf_counter_ns() - t0) * 1e-3
             qdot = res.qdot
@@ -539,6 +559,21 @@ class Simulation:
         log.body_pos[k] = v.xpos
         log.body_quat[k] = v.xquat
         log.sensordata[k] = v.sensordata
+
+    def _world_moved(self) -> bool:
+        """True if a mocap body (an obstacle a fault moves) is not where the IK last saw it.
+
+        The block's commands were computed before its physics, so they saw the world as it
+        was at the block's start; a tick that moves it ends the block, and the next block's
+        commands see the world after that tick, as tick-by-tick IK and physics would
+        (a mocap body moves only by a fault, and the moved world is handed to the controller
+        by :meth:`_command_ticks`).
+        """
+        v = self._views
+        return bool(
+            (v.mocap_pos != self._seen_mocap_pos).any()
+            or (v.mocap_quat != self._seen_mocap_quat).any()
+        )
 
     def _on_mujoco_warning(self, message: str) -> None:
         self.emit(EventKind.MUJOCO_WARNING, f"MuJoCo: {message}", level="warn")
@@ -720,6 +755,8 @@ class _DataViews:
         self.site_xpos = data.site_xpos
         self.site_xmat = data.site_xmat
         self.sensordata = data.sensordata
+        self.mocap_pos = data.mocap_pos
+        self.mocap_quat = data.mocap_quat
 
 
 def _as_slice(ids: np.ndarray) -> slice | np.ndarray:
