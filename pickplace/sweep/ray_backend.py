@@ -115,11 +115,7 @@ class Driver:
         its caller knowing)."""
         self.log: IO[bytes] = tempfile.TemporaryFile()  # noqa: SIM115 (closed in close())
         self.conn, theirs = mp.Pipe(duplex=True)
-        # The pickplace this process runs, for the driver and (through the environment the
-        # cluster's processes inherit) a local cluster's workers.
-        source = str(Path(pickplace.__file__).resolve().parent.parent)
-        path = os.environ.get("PYTHONPATH")
-        env = {**os.environ, "PYTHONPATH": source + (os.pathsep + path if path else "")}
+        env = _driver_environment()
         try:
             self.process = subprocess.Popen(
                 [sys.executable, "-m", "pickplace.sweep.ray_driver", str(theirs.fileno())],
@@ -181,6 +177,19 @@ class Driver:
             self.process.wait()
             self.conn.close()
             self.log.close()
+
+
+def _driver_environment() -> dict[str, str]:
+    """This process's environment, with the folder of the pickplace it runs first on
+    ``PYTHONPATH`` when that is a source tree (not an installed package's folder): the driver
+    and, through the environment a local cluster's processes inherit, its workers run the
+    same code as this process."""
+    env = dict(os.environ)
+    source = Path(pickplace.__file__).resolve().parent.parent
+    if source.name not in ("site-packages", "dist-packages"):
+        path = env.get("PYTHONPATH")
+        env["PYTHONPATH"] = str(source) + (os.pathsep + path if path else "")
+    return env
 
 
 def _refusal(driver: Driver, address: str | None, reason: str) -> InvalidInputError:

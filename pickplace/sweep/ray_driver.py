@@ -10,8 +10,9 @@ process never imports Ray: Ray's signal handlers (which ``ray.init`` installs an
 exit, its log lines ("(raylet) A worker died …") and its processes stay in here, where the
 backend ends them all at once (:func:`pickplace.sweep.session.end_session`).
 
-This process ignores SIGINT and SIGHUP (only the backend decides when it stops; its session
-has no terminal anyway), dies with its parent (``PR_SET_PDEATHSIG``, Linux), and ends with
+This process ignores the stop signals, also after ``ray.init`` put its own SIGTERM handler in
+(only the backend decides when it stops, by :class:`Stop` or by killing its session, which has
+no terminal anyway), dies with its parent (``PR_SET_PDEATHSIG``, Linux), and ends with
 ``os._exit`` once its work is sent: nothing it does after that can change the sweep.
 
 Each trial is one task of :func:`pickplace.sweep.trial.guarded_trial` (one CPU, never
