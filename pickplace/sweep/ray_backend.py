@@ -169,9 +169,10 @@ class Driver:
                     self.conn.send(Stop())
                 deadline = time.monotonic() + grace_s
                 handler = active_handler()
+                stopping = handler is not None and handler.interrupted  # this is the stop
                 while self.process.poll() is None and time.monotonic() < deadline:
-                    if handler is not None and handler.interrupted:
-                        break
+                    if handler is not None and handler.interrupted and not stopping:
+                        break  # a stop signal during the end of the sweep: no more waiting
                     time.sleep(0.02)
             end_session(self.process.pid, KILL_WAIT_S)
             self.process.wait()
