@@ -175,7 +175,9 @@ def assert_stopped(sweep: Sweep, sig: signal.Signals) -> dict[str, Any]:
 # ---------------------------------------------------------------------------- signals
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=str)
+@pytest.mark.parametrize(
+    "sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=lambda s: s.name
+)
 def test_a_signal_to_the_group_while_the_cluster_starts_stops_at_once_leaving_nothing(
     folder: Path, sig: signal.Signals
 ) -> None:
@@ -188,7 +190,9 @@ def test_a_signal_to_the_group_while_the_cluster_starts_stops_at_once_leaving_no
     assert report["completed"] == 0
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=str)
+@pytest.mark.parametrize(
+    "sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=lambda s: s.name
+)
 def test_a_signal_to_the_group_while_tasks_start_gives_the_report_and_no_crash(
     folder: Path, sig: signal.Signals
 ) -> None:
