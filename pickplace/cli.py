@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from _typeshed import SupportsWrite
 
     from pickplace.run.runner import RunRequest
+    from pickplace.sweep.sweep import ResolvedSweep
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_OUTPUT = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; other signals give 128 + their number
@@ -698,7 +699,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
     from pickplace.run.runner import validate_record_path
     from pickplace.sim.vary import parse_vary
     from pickplace.sweep.report import report_text
-    from pickplace.sweep.sweep import SweepRequest, given_and_compared, parse_compare, run_sweep
+    from pickplace.sweep.sweep import SweepRequest, given_and_compared, parse_compare
 
     compare = parse_compare(args.compare) if args.compare else None
     for key, given in (("controller", args.controller), ("robot", args.robot)):
@@ -735,9 +736,8 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
             if progress is not None:
                 progress.advance(progress.tasks[0].id)
 
-        stop.arm()
         try:
-            report = run_sweep(resolved, on_trial=advance)
+            report = _sweep_unless_stopped(resolved, advance, stop)
         finally:
             stop.disarm()
             if progress is not None:
@@ -763,6 +763,21 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
     if record_error is not None:
         return EXIT_OUTPUT
     return EXIT_OK if report["successes"] == report["runs"] else EXIT_FAILED
+
+
+def _sweep_unless_stopped(
+    resolved: ResolvedSweep, advance: Callable[[dict[str, Any]], None], stop: InterruptHandler
+) -> dict[str, Any]:
+    """The sweep's report: :func:`~pickplace.sweep.sweep.run_sweep` with stop signals
+    delivered, or, for one noted during the set-up (imports, validation), the report of no
+    trial at all, interrupted, and no sweep started."""
+    from pickplace.sweep.sweep import run_sweep, sweep_report
+
+    try:
+        stop.arm()  # a signal noted earlier is delivered here
+    except KeyboardInterrupt:
+        return sweep_report(resolved.request, [], 0.0, interrupted=True)
+    return run_sweep(resolved, on_trial=advance)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -160,9 +160,9 @@ def runs_a_trial(pid: int) -> bool:
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc")
 def test_a_ray_sweep_on_its_own_cluster_stops_on_sigterm_with_a_partial_report() -> None:
-    """Signalled once trials run: the sweep's own handler has SIGTERM again. (Until ray.init
-    returns, Ray's handlers have it, and starting the cluster takes 5 to 25 s on a loaded
-    2-core machine: a fixed wait of 15 s sometimes signalled Ray instead.)"""
+    """Signalled once trials run (starting the cluster takes 5 to 25 s on a loaded 2-core
+    machine: a fixed wait would signal it at another stage; tests/test_ray_robustness.py
+    signals every stage)."""
     proc = cli("sweep", "--backend", "ray", "--workers", "2", "--trials", "400", "--json")
     deadline = time.monotonic() + 300
     while not runs_a_trial(proc.pid):  # the cluster is up, trials are running
@@ -174,7 +174,7 @@ def test_a_ray_sweep_on_its_own_cluster_stops_on_sigterm_with_a_partial_report()
     out, err = proc.communicate(timeout=60)
     took = time.monotonic() - t0
     assert proc.returncode == 128 + signal.SIGTERM
-    assert took < 10.0, took  # cancel the tasks, stop the cluster (README: about 2 s)
+    assert took < 5.0, took  # the driver's session killed (docs/sweeps.md: within 5 s)
     assert err.strip() == "pickplace: stopped by SIGTERM"
     report = json.loads(out)
     assert report["interrupted"] is True

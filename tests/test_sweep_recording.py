@@ -307,9 +307,21 @@ def test_outcome_colours_are_distinct() -> None:
     assert colors["success"] == SUCCESS_COLOR
 
 
+def test_a_sweep_stopped_before_any_trial_ended_is_recorded_with_its_report(
+    scene: Scene, tmp_path: Path
+) -> None:
+    plan = parse_vary(["brick_mass=0.2:1"])
+    report = sweep_report(
+        SweepRequest(trials=5, first_seed=3, vary=plan), [], 0.0, interrupted=True
+    )
+    path = write_sweep_recording(tmp_path / "x.rrd", [], report, plan, scene=scene)
+    ents = read_entities(path)
+    assert "report" in ents and "world/source_bin/floor" in ents
+    assert not [n for n in ents if n.startswith("world/trials") or n == "world/legend"]
+    assert "plots/success_by/brick_mass/axes" in ents  # its chart, without bars
+
+
 def test_bad_input_is_refused(scene: Scene, tmp_path: Path) -> None:
-    with pytest.raises(InvalidInputError, match="at least one trial"):
-        write_sweep_recording(tmp_path / "x.rrd", [], {}, scene=scene)
     plan = parse_vary(["brick_mass=0.2:1"])
     trials, draws = synthetic_trials(scene, plan, range(3))
     with pytest.raises(InvalidInputError, match="no parameter draw"):

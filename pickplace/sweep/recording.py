@@ -62,7 +62,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from pickplace.errors import InvalidInputError, OutputError, RecordingError
+from pickplace.errors import OutputError, RecordingError
 from pickplace.outfile import OutputFile
 from pickplace.record.rrd_file import commit_bytes
 from pickplace.sim.loader import load_scene
@@ -287,6 +287,8 @@ def _log_legend(
 ) -> None:
     """One labelled point per (label, colour) in a column beside the bin (outside its +x
     wall)."""
+    if not entries:  # no trial ended (a sweep stopped at its start)
+        return
     hx, hy = bin_.inner_half_extents
     n = len(entries)
     step = 2.0 * hy / max(n, 1)
@@ -719,10 +721,9 @@ def log_sweep(
         The success rate per bin of each varied parameter, as plotted (over every trial).
 
     Raises:
-        InvalidInputError: No trials, or a trial without a draw when parameters vary.
+        InvalidInputError: A trial without a draw when parameters vary. (No trials at all, a
+            sweep stopped before any ended, is the bin, the empty charts and the report.)
     """
-    if not trials:
-        raise InvalidInputError("a sweep recording needs at least one trial, got none")
     scene = scene or load_scene()
     by_seed = {d.seed: d for d in draws}
     varied = plan is not None and bool(plan.specs)
@@ -772,8 +773,12 @@ def log_sweep(
 
 def _default_recording_id(trials: Sequence[Mapping[str, Any]], report: Mapping[str, Any]) -> str:
     seeds = [int(t["seed"]) for t in trials]
-    scenario = report.get("scenario", trials[0].get("scenario", "sweep"))
-    what = report.get("compare_flag") or report.get("controller") or trials[0].get("controller")
+    if not seeds:  # stopped before any trial ended: the seeds asked for
+        first = int(report.get("first_seed", 0))
+        seeds = [first, first + max(0, int(report.get("trials", 1)) - 1)]
+    first_trial = trials[0] if trials else {}
+    scenario = report.get("scenario", first_trial.get("scenario", "sweep"))
+    what = report.get("compare_flag") or report.get("controller") or first_trial.get("controller")
     return f"sweep/{scenario}/{what or ''}/seeds-{min(seeds)}-{max(seeds)}"
 
 
@@ -793,8 +798,6 @@ def encode_sweep(
         RecordingError: The recording could not be encoded.
         InvalidInputError: See :func:`log_sweep`.
     """
-    if not trials:
-        raise InvalidInputError("a sweep recording needs at least one trial, got none")
     scene = scene or load_scene()
     rid = recording_id or _default_recording_id(trials, report)
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid)
@@ -866,12 +869,9 @@ def record_sweep(output: OutputFile, req: SweepRequest, report: Mapping[str, Any
     before the sweep, so that a second writer of the path is refused at once).
 
     Raises:
-        OutputError: Nothing finished, or the file could not be written or encoded.
+        OutputError: The file could not be written or encoded.
     """
     trials = report["trial_results"]
-    if not trials:
-        output.discard()
-        raise OutputError(f"no trial finished: nothing to record in '{output.path}'")
     scene = load_scene(robot=req.specs()[0].robot)  # composed by the sweep: a cache hit
     try:
         data = encode_sweep(trials, report, req.vary, scene=scene)

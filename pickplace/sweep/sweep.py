@@ -58,7 +58,7 @@ from pickplace.run.runner import (
 from pickplace.signals import STOP_SIGNALS, ignore_in_child
 from pickplace.sim.loader import load_scene
 from pickplace.sim.vary import VaryPlan
-from pickplace.sweep.ray_backend import check_address, require_ray, run_ray
+from pickplace.sweep.ray_backend import check_ray, run_ray
 from pickplace.sweep.report import SWEEP_WALL_TIME_FIELDS, build_report
 from pickplace.sweep.trial import (
     POLL_PERIOD_S,
@@ -287,9 +287,7 @@ class SweepRequest:
                     f"--workers must be in [1, {top}]{where}, got {self.workers}"
                 )
         if self.backend == "ray":
-            require_ray()
-            if self.address is not None:
-                check_address(self.address)
+            check_ray(self.address)
         return ResolvedSweep(self, robots)
 
     def _validate_control_rates(self) -> None:

@@ -4,7 +4,7 @@ A trial is a run request without its seed, plus the seed. What a sweep keeps of 
 compact summary (:func:`compact_summary`: the keys in :data:`TRIAL_KEYS`, the failure's text,
 the number of attempts, the drawn parameters), about 0.6 kB; a trial that gave no summary (its
 worker died or raised) is a lost-trial entry (:func:`lost_trial`). Both backends
-(:mod:`pickplace.sweep.sweep`, :mod:`pickplace.sweep.ray_backend`) run :func:`guarded_trial`.
+(:mod:`pickplace.sweep.sweep`, :mod:`pickplace.sweep.ray_driver`) run :func:`guarded_trial`.
 """
 
 from __future__ import annotations
