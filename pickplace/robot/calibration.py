@@ -867,7 +867,9 @@ def _grasp_depth(
     Midway between the pads is where the pads' centres hold the brick's; a grasp also needs
     the fingers' farthest point (over ``states``: the gripper open and closed) at least
     :data:`TIP_CLEARANCE` short of the brick's far face, which rests on a floor, and the open
-    gripper clear of the brick (a palm reaching between short pads). When either fails at the
+    gripper's palm (its geoms that do not move) clear of the brick: a palm reaching between
+    short pads (robosuite's Panda hand). Fingers that touch the brick open are not moved
+    away from: that gripper does not open around it (:func:`_squeeze`). When either fails at the
     midpoint the tool point moves towards the fingertips until both hold (the palm by
     :data:`PALM_CLEARANCE`), and the pads hold the brick nearer the face by the palm.
     """
@@ -887,10 +889,12 @@ def _grasp_depth(
         before = float(rig.model.geom_margin[g])
         rig.model.geom_margin[g] = margin
         mujoco.mj_forward(rig.model, rig.data)
-        hit = any(
-            rig.box_geoms["brick"] in (int(c.geom1), int(c.geom2)) and c.dist < margin
-            for c in rig.data.contact[: rig.data.ncon]
-        )
+        hit = False
+        for c in rig.data.contact[: rig.data.ncon]:
+            pair = (int(c.geom1), int(c.geom2))
+            other = pair[1] if pair[0] == g else pair[0]
+            palm = not rig.moving_body[rig.model.geom_bodyid[other]]
+            hit = hit or (g in pair and palm and c.dist < margin)
         rig.model.geom_margin[g] = before
         rig.place_box(None)
         return hit
@@ -919,6 +923,14 @@ def _squeeze(
     rig.place_box("brick", pos_B, R_BG)
     if rig.box_contacts("brick"):
         touched = ", ".join(sorted(rig.name(g) for g in rig.box_contacts("brick")))
+        if all(rig.moving_body[rig.model.geom_bodyid[g]] for g in rig.box_contacts("brick")):
+            width = 2000.0 * float(rig.model.geom_size[rig.box_geoms["brick"], 1])
+            raise _Problem(
+                "mjcf",
+                f"the gripper cannot open wider than the brick: open, its fingers touch a "
+                f"brick centred on its tool point ({touched}), the brick is {width:.1f} mm "
+                f"wide; valid: a gripper that opens wider than the brick",
+            )
         raise _Problem(
             "mjcf",
             f"the open gripper already touches a brick centred on its tool point ({touched}); "
@@ -1036,12 +1048,14 @@ def _close_time(
 ) -> tuple[float, float]:
     """The close time [s] and the squeeze width [m] (:attr:`GripperCalibration.squeeze_width`).
 
-    A plan ramps the commanded gap to 0, through the gap map, so the closed command arrives
-    only as the ramp ends. A gripper whose squeeze follows its command with a lag (no force
-    range that saturates once the command passes the brick: a position gain with damping,
-    e.g. a gain of 100 and a damping of 10 on the tendon, 0.1 s) cannot press with its squeeze
-    by then, however long the ramp. Such a gripper is given the closed command as soon as the
-    commanded gap reaches the brick's width ``width``, and measured again.
+    A plan ramps the commanded gap to 0 through the gap map, so the closed command arrives
+    only as the ramp ends, or never: where the free fingers pass each other (a negative
+    closed width) a gap of 0 is a command short of closed, and a gripper without a force range
+    that saturates (its squeeze the gain times the command's travel past the brick: robosuite's
+    Robotiq 140) squeezes with a fraction of its squeeze; a squeeze that builds through a
+    compliant linkage after the command arrives (the xArm gripper's soft loop constraints, 0.3
+    s from a step) is not steady by the ramp's end. Such a gripper is given the closed command
+    as soon as the commanded gap reaches the brick's width ``width``, and measured again.
     """
     what = "close on a brick-sized box"
     try:
