@@ -856,7 +856,6 @@ def _reach_along(rig: _Rig, g: int, axis_B: np.ndarray) -> float:
 
 def _grasp_depth(
     rig: _Rig,
-    states: list[np.ndarray],
     open_state: np.ndarray,
     tcp_B: np.ndarray,
     R_BG: np.ndarray,
@@ -865,7 +864,8 @@ def _grasp_depth(
     """The tool point moved along the approach, away from the palm, as far as a grasp needs.
 
     Midway between the pads is where the pads' centres hold the brick's; a grasp also needs
-    the fingers' farthest point (over ``states``: the gripper open and closed) at least
+    the fingers' farthest point (open, and as they are now: closed on the probe or the brick,
+    at the brick's width; a linkage's fingertips move along the approach as it closes) at least
     :data:`TIP_CLEARANCE` short of the brick's far face, which rests on a floor, and the open
     gripper's palm (its geoms that do not move) clear of the brick: a palm reaching between
     short pads (robosuite's Panda hand). Fingers that touch the brick open are not moved
@@ -877,7 +877,7 @@ def _grasp_depth(
     entry = rig.state()
     placed = dict(rig.placed)
     reach = -np.inf
-    for state in states:
+    for state in (open_state, entry):
         rig.restore(state)
         reach = max(reach, max(_reach_along(rig, int(g), z_B) for g in rig.geoms))
     shift = max(0.0, reach + TIP_CLEARANCE - half[2] - float(tcp_B @ z_B))
@@ -1173,7 +1173,6 @@ def _calibrate(
 
     rig.settle(u_closed, "closing")
     c_closed = rig.geom_centres_B()
-    closed_state = rig.state()
     rig.settle(u_open, "opening")
     c_open = rig.geom_centres_B()
     open_state = rig.state()
@@ -1198,7 +1197,7 @@ def _calibrate(
         positions = _probe_positions(rig, axes, half)
         side_pads, _ = _find_pads(rig, axes, open_state, u_closed, positions, named)
         tcp_B = _midway(rig, side_pads, y_B)
-        tcp_B = _grasp_depth(rig, [open_state, closed_state], open_state, tcp_B, R_BG, half)
+        tcp_B = _grasp_depth(rig, open_state, tcp_B, R_BG, half)
     else:
         side_pads = ([], [])
     for _ in range(PAD_ITERATIONS):
@@ -1220,7 +1219,7 @@ def _calibrate(
         side_pads = found
         if not fixed_tcp:
             tcp_B = _midway(rig, side_pads, y_B)
-            tcp_B = _grasp_depth(rig, [open_state, closed_state], open_state, tcp_B, R_BG, half)
+            tcp_B = _grasp_depth(rig, open_state, tcp_B, R_BG, half)
     pos_pads, neg_pads = side_pads
 
     # Squeeze with stiff pads: normal forces per side, the gap, and the tool point again.
@@ -1241,7 +1240,7 @@ def _calibrate(
     gap_on_brick = _gap(rig, side_pads, faces, y_B)
     if not fixed_tcp:
         tcp_B = _midway(rig, side_pads, y_B)
-        tcp_B = _grasp_depth(rig, [open_state, closed_state], open_state, tcp_B, R_BG, half)
+        tcp_B = _grasp_depth(rig, open_state, tcp_B, R_BG, half)
 
     # Gap map: closed to open, fingers free.
     rig.place_box(None)
