@@ -136,10 +136,14 @@ RELEASE_CLEARANCE = 0.005
 gripper opens beyond the brick, when that is less)."""
 
 TIP_CLEARANCE = 0.008
-"""The fingers' farthest point along the approach stays this far [m] short of the far face of a
-brick centred on the tool point: the pre-flight's 5 mm clearance from the floor the brick
+"""The open fingers' farthest point along the approach stays this far [m] short of the far face
+of a brick centred on the tool point: the pre-flight's 5 mm clearance from the floor the brick
 rests on, plus the 3 mm by which the tool arrives off the planned pick at full speed
-(``pickplace.planning.candidates.PAD_CLEARANCE``)."""
+(``pickplace.planning.candidates.PAD_CLEARANCE``) ..."""
+
+GRIP_TIP_CLEARANCE = 0.005
+"""... and the gripping fingers' this far [m]: the pre-flight's 5 mm alone, the tool having
+stopped at the pick before the fingers close."""
 
 PALM_CLEARANCE = 0.003
 """A brick centred on the tool point clears the open gripper by this [m] when the tool point
@@ -864,23 +868,23 @@ def _grasp_depth(
     """The tool point moved along the approach, away from the palm, as far as a grasp needs.
 
     Midway between the pads is where the pads' centres hold the brick's; a grasp also needs
-    the fingers' farthest point (open, and as they are now: closed on the probe or the brick,
-    at the brick's width; a linkage's fingertips move along the approach as it closes) at least
-    :data:`TIP_CLEARANCE` short of the brick's far face, which rests on a floor, and the open
-    gripper's palm (its geoms that do not move) clear of the brick: a palm reaching between
-    short pads (robosuite's Panda hand). Fingers that touch the brick open are not moved
-    away from: that gripper does not open around it (:func:`_squeeze`). When either fails at the
-    midpoint the tool point moves towards the fingertips until both hold (the palm by
-    :data:`PALM_CLEARANCE`), and the pads hold the brick nearer the face by the palm.
+    the fingers' farthest point at least :data:`TIP_CLEARANCE` short of the brick's far face,
+    which rests on a floor, when open, and :data:`GRIP_TIP_CLEARANCE` as they are now (closed
+    on the probe or the brick, at the brick's width: a linkage's fingertips move along the
+    approach as it closes); and the open gripper's palm (its geoms that do not move) clear of
+    the brick: a palm reaching between short pads. Fingers that touch the brick open are not
+    moved away from: that gripper does not open around it (:func:`_squeeze`). When either
+    fails at the midpoint the tool point moves towards the fingertips until both hold (the
+    palm by :data:`PALM_CLEARANCE`), and the pads hold the brick nearer the face by the palm.
     """
     z_B = R_BG[:, 2]
     entry = rig.state()
     placed = dict(rig.placed)
-    reach = -np.inf
-    for state in (open_state, entry):
+    shift = 0.0
+    for state, clearance in ((open_state, TIP_CLEARANCE), (entry, GRIP_TIP_CLEARANCE)):
         rig.restore(state)
-        reach = max(reach, max(_reach_along(rig, int(g), z_B) for g in rig.geoms))
-    shift = max(0.0, reach + TIP_CLEARANCE - half[2] - float(tcp_B @ z_B))
+        reach = max(_reach_along(rig, int(g), z_B) for g in rig.geoms)
+        shift = max(shift, reach + clearance - half[2] - float(tcp_B @ z_B))
     rig.restore(open_state)
 
     def touches(s: float, margin: float) -> bool:
