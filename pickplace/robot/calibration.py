@@ -1272,6 +1272,16 @@ def _calibrate(
             f"gripper that opens wider than the brick",
         )
 
+    narrowest = 2.0 * float(min(half[0], half[1]))
+    if gap_arr[-1] < narrowest + 2.0 * GRASP_PAD_CLEARANCE:
+        raise _Problem(
+            "mjcf",
+            f"the gripper opens to {1000 * gap_arr[-1]:.1f} mm, and a grasp needs the brick's "
+            f"{1000 * narrowest:.1f} mm plus {1000 * GRASP_PAD_CLEARANCE:g} mm beside each face; "
+            f"valid: a gripper that opens to at least "
+            f"{1000 * (narrowest + 2 * GRASP_PAD_CLEARANCE):.1f} mm",
+        )
+
     # Action times: the plan's ramps of the commanded gap, closing on the box and opening.
     actions = _Actions(rig, side_pads, faces, y_B, fractions, gap_arr, u_open, u_closed)
     rig.restore(open_state)
@@ -1327,6 +1337,12 @@ def _calibrate(
         sim_time=rig.sim_time,
     )
 
+
+GRASP_PAD_CLEARANCE = 0.006
+"""Gap a grasp leaves between each open pad and the brick's face [m]: the planner's
+``pickplace.planning.candidates.PAD_CLEARANCE`` (not imported: planning imports the robot; a
+test holds them equal). A gripper that opens less than the brick plus this on each side has no
+grasp candidate, and is refused."""
 
 GRASP_OPEN_WIDTH = 0.10
 """Gap a gripper opens to around the brick for a grasp, at most [m]: 25 mm beside each face of

@@ -24,7 +24,6 @@ import numpy as np
 
 from pickplace.errors import RobotError
 from pickplace.geometry import rotate_by_quat
-from pickplace.planning.candidates import PAD_CLEARANCE
 from pickplace.robot import calibration_cache
 from pickplace.robot.calibration import (
     GRIPPER_PREFIX,
@@ -245,14 +244,6 @@ def _compose(
             gripper, grip_part.digest, desc, half, friction, options, squeeze_ratio=ratio
         )
 
-    narrowest = 2.0 * float(min(half[0], half[1]))
-    if calibration.open_width < narrowest + 2.0 * PAD_CLEARANCE:
-        raise RobotError(
-            f"{desc.source}: [gripper] mjcf: '{grip_part.path.name}' opens to "
-            f"{1000 * calibration.open_width:.1f} mm, and a grasp needs the brick's "
-            f"{1000 * narrowest:.1f} mm plus {1000 * PAD_CLEARANCE:g} mm beside each face; valid: "
-            f"a gripper that opens to at least {1000 * (narrowest + 2 * PAD_CLEARANCE):.1f} mm"
-        )
     gspec = gripper.spec.copy()
     for pad in calibration.pads[0] + calibration.pads[1]:
         set_stiff_pad(gspec.geom(pad), options.timestep)
