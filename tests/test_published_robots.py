@@ -1,5 +1,8 @@
 """Robots from published files, unmodified: MuJoCo Menagerie's, shipped in robots/menagerie/.
 
+robosuite 1.5.2's Panda, xArm and Robotiq 140 grippers, unmodified in robots/robosuite/, are
+composed on Menagerie's iiwa 14: each is calibrated as its geometry needs and picks and places.
+
 The bundled ``menagerie-*`` robots are described in a few lines over Menagerie's own files
 (their nominal pick-and-place and random seeds run in tests/test_bundled_robots.py with every
 bundled robot). Here: what composing published files needs — geoms without names addressed by
@@ -24,6 +27,7 @@ from pickplace.errors import RobotError
 from pickplace.robot.compose import ARM_FLOOR_CLEARANCE, load_robot
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_WORLD, ROBOTS_DIR, bundled_robots
+from pickplace.run.runner import RunRequest, run
 
 MENAGERIE = ROBOTS_DIR / "menagerie"
 PANDA = MENAGERIE / "franka_emika_panda"
@@ -161,3 +165,72 @@ def test_a_second_process_reads_the_calibration_from_disk(tmp_path: Path) -> Non
     files[0].write_text("{not json", encoding="utf-8")
     assert calibrate() == first  # an unreadable file is measured again and rewritten
     assert np.isfinite(json.loads(files[0].read_text(encoding="utf-8"))["close_time"])
+
+
+# robosuite 1.5.2's grippers, unmodified (robots/robosuite/<model>/), on Menagerie's iiwa 14.
+ROBOSUITE = ROBOTS_DIR / "robosuite"
+IIWA14 = f"""
+[arm]
+mjcf = "{MENAGERIE / "kuka_iiwa_14" / "iiwa14.xml"}"
+speed_limits = [1.4835299, 1.4835299, 1.7453293, 1.3089969, 2.2689280, 2.3561945, 2.3561945]
+accel_limits = [8.57, 8.57, 8.74, 11.36, 12.23, 15.72, 15.72]
+"""
+
+
+def _robosuite(tmp_path: Path, model: str) -> Path:
+    assert (ROBOSUITE / model / "LICENSE").is_file()
+    return _description(
+        tmp_path,
+        f'name = "iiwa14-{model}"\n{IIWA14}[gripper]\n'
+        f'mjcf = "{ROBOSUITE / model / (model + ".xml")}"\nangle = "radian"\n',
+    )
+
+
+def _picks_and_places(path: Path) -> None:
+    result = run(RunRequest(scenario="pick-place", robot=str(path)))
+    assert result.success, result.summary()["events"][-2:]
+    assert result.metrics["place_error_m"] < 0.005
+
+
+@pytest.mark.slow
+def test_robosuite_xarm_gripper_opens_its_85_mm_between_its_pad_boxes(tmp_path: Path) -> None:
+    # Its inner knuckles, nearer the palm, reach within 23 mm of each other: not level with
+    # the fingertips, they do not bound the opening.
+    path = _robosuite(tmp_path, "xarm7_gripper")
+    cal = load_robot(path).robot.calibration
+    assert cal.open_width == pytest.approx(0.0855, abs=2e-3)
+    assert {p.split("_pad")[0] for side in cal.pads for p in side} == {
+        "left_finger",
+        "right_finger",
+    }
+    _picks_and_places(path)
+
+
+@pytest.mark.slow
+def test_robosuite_robotiq_140_closes_on_the_brick_with_its_squeeze(tmp_path: Path) -> None:
+    # Its fingers cross when closed free and its actuators have no force range: a commanded
+    # gap of 0 is short of the closed command, so the command closes at the brick's width.
+    path = _robosuite(tmp_path, "robotiq_gripper_140")
+    robot = load_robot(path).robot
+    cal = robot.calibration
+    assert cal.closed_width < 0.0
+    assert cal.squeeze_width == pytest.approx(2.0 * cal.brick_half_extents[1])
+    np.testing.assert_array_equal(robot.ctrl_for_width(0.0), cal.closed_command)
+    assert cal.close_time <= 2.0 and min(cal.squeeze_per_side) > 10.0
+    _picks_and_places(path)
+
+
+@pytest.mark.slow
+def test_robosuite_panda_gripper_is_measured_on_its_pad_boxes_clear_of_its_palm(
+    tmp_path: Path,
+) -> None:
+    # The probe at the fingertips first meets the finger meshes, which reach 8 mm past the
+    # 16 mm pad boxes; midway between them (79 mm from the root) a brick would stand in the
+    # palm. The fingers' reach puts the tool point where the brick clears the floor, there the
+    # brick finds the pad boxes, and the tool point is midway between them (93.4 mm).
+    path = _robosuite(tmp_path, "panda_gripper")
+    cal = load_robot(path).robot.calibration
+    assert cal.pads == (("finger2_pad_collision",), ("finger1_pad_collision",))
+    np.testing.assert_allclose(cal.pos_BG, [0.0, 0.0, 0.0934], atol=5e-4)
+    assert "hand_collision" not in cal.other_contacts
+    _picks_and_places(path)

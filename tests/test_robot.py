@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from pickplace.errors import PickPlaceError, RobotError
+from pickplace.robot.calibration import PALM_CLEARANCE, TIP_CLEARANCE
 from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, load_robot
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.home_ik import HOME_TOOL_SITE
@@ -30,6 +31,7 @@ from pickplace.robot.physics import (
 from pickplace.robot.registry import DEFAULT_ROBOT, bundled_robots
 from tests.toy_robot import (
     BAD_CASES,
+    TOY_ARM,
     TOY_GRIPPER,
     TOY_MOTOR_LIMITS,
     TOY_SPEED_LIMITS,
@@ -384,3 +386,136 @@ def test_the_documented_example_description_is_valid_and_sets_every_field(tmp_pa
     g = desc.gripper
     assert g.pads == (("left_pad",), ("right_pad",)) and g.tcp is not None and g.tcp.site
     assert g.open_command and g.closed_command and g.grip_force == 40.0 and g.couple_fingers
+
+
+# ------------------------------------------------------- grippers as other projects publish them
+
+
+def _toy_gripper(**changes: str) -> str:
+    """TOY_GRIPPER with each ``old=new`` text replaced (keys are labels, values "old|new")."""
+    text = TOY_GRIPPER
+    for change in changes.values():
+        old, new = change.split("|")
+        assert old in text, old
+        text = text.replace(old, new)
+    return text
+
+
+def test_default_flange_follows_the_branch_that_carries_the_arm(tmp_path: Path) -> None:
+    # A head on one joint branches off the first link (as on Rethink's Sawyer) and a camera
+    # mount without joints off the last: the arm's branch has more joints below it than the
+    # others together, so the default flange is still the arm's last body.
+    arm = TOY_ARM.replace(
+        '<geom fromto="0 0 0 0 0 0.05"/>\n        <body name="l2"',
+        '<geom fromto="0 0 0 0 0 0.05"/>\n        <body name="head" pos="0 0 0.05">\n'
+        '          <joint name="head_pan" axis="0 0 1" range="-90 90"/>\n'
+        '          <geom size="0.02" fromto="0 0 0 0.1 0 0"/>\n        </body>\n'
+        '        <body name="l2"',
+    ).replace(
+        '<geom type="cylinder" size="0.035 0.01"/>\n                </body>',
+        '<geom type="cylinder" size="0.035 0.01"/>\n                  <body name="camera"/>\n'
+        '                  <body name="cable"/>\n                </body>',
+    )
+    assert "head_pan" in arm and 'name="camera"' in arm
+    toml = TOY_TOML.replace('flange = "hand_mount"\n', "")
+    robot = load_robot(write_toy_robot(tmp_path, arm=arm, toml=toml)).robot
+    joints = ("yaw", "shoulder", "elbow", "wrist1", "wrist2", "wrist3")
+    assert robot.arm_joint_names == tuple(ARM_PREFIX + j for j in joints)
+    assert any("no [arm] flange given: the body 'hand_mount'" in r for r in robot.repairs)
+
+
+def test_finger_geoms_not_level_with_the_fingertips_do_not_bound_the_opening(
+    tmp_path: Path,
+) -> None:
+    # Each finger carries a crossbar near the palm that reaches past the midplane (robosuite's
+    # Rethink gripper: the opening was measured to it, -14.2 mm). Only geoms level with the
+    # probe bound it: the pads open 94 mm.
+    gripper = _toy_gripper(
+        a='name="a_link"|name="a_bar" size="0.004 0.03 0.004" pos="-0.006 -0.02 0.004"/>\n'
+        '        <geom class="finger" name="a_link"',
+        b='name="b_link"|name="b_bar" size="0.004 0.03 0.004" pos="0.006 0.02 0.004"/>\n'
+        '        <geom class="finger" name="b_link"',
+    )
+    cal = load_robot(write_toy_robot(tmp_path, gripper=gripper)).robot.calibration
+    assert cal.open_width == pytest.approx(0.094, abs=1e-4)
+    assert not {"a_bar", "b_bar"} & set(cal.pads[0] + cal.pads[1])
+
+
+def test_a_palm_between_short_pads_moves_the_tool_point_towards_the_fingertips(
+    tmp_path: Path,
+) -> None:
+    # The palm's top (z 0.08 m) lies within half a brick (25 mm) of the pads' centre (z
+    # 0.095 m): a brick centred between the pads would touch it (robosuite's Panda hand). The
+    # grasp holds the brick nearer its top face instead, the palm 3 mm clear of it.
+    gripper = _toy_gripper(
+        palm='size="0.03 0.05 0.025" pos="0 0 0.025"|size="0.03 0.05 0.04" pos="0 0 0.04"'
+    )
+    robot = load_robot(write_toy_robot(tmp_path, gripper=gripper)).robot
+    cal = robot.calibration
+    palm_top, half = 0.08, cal.brick_half_extents[2]
+    assert cal.pos_BG[2] == pytest.approx(palm_top + half + PALM_CLEARANCE, abs=2e-4)
+    assert set(cal.pads[0] + cal.pads[1]) == {"a_pad1", "a_pad2", "b_pad1", "b_pad2"}
+    assert cal.pos_BG[2] - half < 0.095 - 0.01  # the brick still covers the pads (z 0.085-0.105)
+
+
+def test_fingers_reaching_past_a_brick_on_the_floor_move_the_tool_point(tmp_path: Path) -> None:
+    # The finger links reach 35 mm beyond the pads' centre: with the brick centred between the
+    # pads they would stand 10 mm into the floor it rests on. The tool point moves until they
+    # stop TIP_CLEARANCE short of the brick's far face.
+    gripper = _toy_gripper(
+        a='size="0.01 0.006 0.03" pos="0 0.012 0.03"|size="0.01 0.006 0.04" pos="0 0.012 0.04"',
+        b='size="0.01 0.006 0.03" pos="0 -0.012 0.03"|size="0.01 0.006 0.04" pos="0 -0.012 0.04"',
+    )
+    cal = load_robot(write_toy_robot(tmp_path, gripper=gripper)).robot.calibration
+    tips = 0.05 + 0.08  # the finger links' far end in the root's frame [m]
+    assert cal.pos_BG[2] == pytest.approx(
+        tips + TIP_CLEARANCE - cal.brick_half_extents[2], abs=1e-6
+    )
+    default = load_robot(write_toy_robot(tmp_path / "default")).robot.calibration
+    assert default.pos_BG[2] == pytest.approx(0.095, abs=1e-4)  # nothing to move: midway
+
+
+# Fingers that pass each other when closed free (free gap -16 mm) on position actuators without a
+# force range: the squeeze is the gain times the command's travel past the brick, and the
+# command for a gap of 0 (where a plan's close ends) leaves a third of it out (robosuite's
+# Robotiq 140: kp 20 and no force range, its fingers crossing).
+PASSING_GRIPPER = TOY_GRIPPER.replace('range="0 0.045"', 'range="-0.01 0.045"').replace(
+    ' forcerange="-25 25"', ""
+)
+
+
+def test_a_gripper_short_of_its_squeeze_at_gap_0_closes_once_the_gap_reaches_the_brick(
+    tmp_path: Path,
+) -> None:
+    robot = load_robot(write_toy_robot(tmp_path, gripper=PASSING_GRIPPER)).robot
+    cal = robot.calibration
+    width = 2.0 * cal.brick_half_extents[1]
+    assert cal.closed_width == pytest.approx(-0.016, abs=1e-4)
+    assert cal.squeeze_width == width  # the gap map alone never closes it in time
+    np.testing.assert_array_equal(robot.ctrl_for_width(width), cal.closed_command)
+    np.testing.assert_array_equal(
+        robot.ctrl_for_widths(np.array([0.0, width]))[1], cal.closed_command
+    )
+    assert robot.ctrl_for_width(width + 1e-3)[0] > cal.closed_command[0]
+    assert cal.close_time <= 1.0
+    forced = load_robot(write_toy_robot(tmp_path / "wsg")).robot.calibration
+    assert forced.squeeze_width == forced.closed_width  # a force range saturates: as mapped
+
+
+def test_a_gripper_that_opens_less_than_a_grasp_needs_is_refused_in_one_line(
+    tmp_path: Path,
+) -> None:
+    gripper = TOY_GRIPPER.replace('range="0 0.045"', 'range="0 0.028"')  # joints, ctrl
+    path = write_toy_robot(tmp_path, gripper=gripper)
+    with pytest.raises(RobotError) as err:
+        load_robot(path)
+    message = str(err.value)
+    assert "\n" not in message and str(path) in message and "[gripper] mjcf" in message
+    assert "opens to 60.0 mm" in message and "at least 62.0 mm" in message
+
+
+def test_the_calibrations_grasp_clearance_is_the_planners() -> None:
+    from pickplace.planning.candidates import PAD_CLEARANCE
+    from pickplace.robot.calibration import GRASP_PAD_CLEARANCE
+
+    assert GRASP_PAD_CLEARANCE == PAD_CLEARANCE

@@ -135,6 +135,23 @@ RELEASE_CLEARANCE = 0.005
 """The pads have let go when each clears the brick by this [m] (or by half of what the
 gripper opens beyond the brick, when that is less)."""
 
+TIP_CLEARANCE = 0.008
+"""The open fingers' farthest point along the approach stays this far [m] short of the far face
+of a brick centred on the tool point: the pre-flight's 5 mm clearance from the floor the brick
+rests on, plus the 3 mm by which the tool arrives off the planned pick at full speed
+(``pickplace.planning.candidates.PAD_CLEARANCE``) ..."""
+
+GRIP_TIP_CLEARANCE = 0.005
+"""... and the gripping fingers' this far [m]: the pre-flight's 5 mm alone, the tool having
+stopped at the pick before the fingers close."""
+
+PALM_CLEARANCE = 0.003
+"""A brick centred on the tool point clears the open gripper by this [m] when the tool point
+had to move away from the palm: the same 3 mm by which the tool arrives off the pick."""
+
+DEPTH_STEPS = 20
+"""Bisection steps of the tool point's move away from the palm (0.1 mm over 10 cm)."""
+
 _SNAP = 1e-9
 
 
@@ -175,6 +192,9 @@ class GripperCalibration:
         open_width: Gap at the open command [m].
         closed_width: Gap at the closed command, fingers free [m] (may be < 0 when fingers
             pass each other: robot geoms do not collide with each other).
+        squeeze_width: Commanded gaps at or below this [m] give the closed command:
+            ``closed_width``, or the brick's width for a gripper that the gap map alone does
+            not close in time (see :func:`calibrate_gripper`).
         pads: Pad geoms of the +y side and of the -y side.
         pad_faces: Per side, each pad's face point in the pad geom's own frame [m].
         pos_BG: Tool point in B [m].
@@ -205,6 +225,7 @@ class GripperCalibration:
     sweep_qpos: np.ndarray
     open_width: float
     closed_width: float
+    squeeze_width: float
     pads: tuple[tuple[str, ...], tuple[str, ...]]
     pad_faces: tuple[np.ndarray, np.ndarray]
     pos_BG: np.ndarray
@@ -221,9 +242,14 @@ class GripperCalibration:
     sim_time: float
 
     def fraction_for_width(self, width: float) -> float:
-        """Sweep fraction whose free gap is ``width`` [m], clipped to [0, 1]."""
-        s = np.interp(width, self.sweep_gap, self.sweep_fraction)
-        return float(np.clip(s, 0.0, 1.0))
+        """Sweep fraction whose free gap is ``width`` [m], clipped to [0, 1]; 0 (closed) at
+        or below ``squeeze_width``."""
+        return float(self.fractions_for_widths(np.array([width]))[0])
+
+    def fractions_for_widths(self, widths: np.ndarray) -> np.ndarray:
+        """:meth:`fraction_for_width` of every entry of ``widths`` [m]."""
+        s = np.clip(np.interp(widths, self.sweep_gap, self.sweep_fraction), 0.0, 1.0)
+        return np.where(np.asarray(widths) <= self.squeeze_width, 0.0, s)
 
     def command(self, fraction: float) -> np.ndarray:
         """Command at sweep fraction ``fraction`` (0 closed, 1 open)."""
@@ -232,14 +258,14 @@ class GripperCalibration:
     def ctrl_for_width(self, width: float) -> np.ndarray:
         """Command that holds the free fingers at gap ``width`` [m].
 
-        Widths at or below ``closed_width`` give the closed command (full squeeze on an
+        Widths at or below ``squeeze_width`` give the closed command (full squeeze on an
         object); at or above ``open_width`` the open command.
         """
         return self.command(self.fraction_for_width(width))
 
     def qpos_for_width(self, width: float) -> np.ndarray:
         """Gripper joint positions (order of ``joints``) of the free fingers at ``width``."""
-        s = self.fraction_for_width(width)
+        s = float(np.clip(np.interp(width, self.sweep_gap, self.sweep_fraction), 0.0, 1.0))
         return np.array(
             [np.interp(s, self.sweep_fraction, q) for q in self.sweep_qpos.T], dtype=float
         )
@@ -600,8 +626,20 @@ def _axes(rig: _Rig, c_open: np.ndarray, c_closed: np.ndarray, tcp: TcpOverride 
         R_BG = R_BG.reshape(3, 3)
     y = R_BG[:, 1]
     along = (delta - delta.mean(axis=0)) @ y
-    side = {int(g): (1 if a < 0 else -1) for g, a in zip(geoms, along, strict=True)}
+    by_motion = {int(g): (1 if a < 0 else -1) for g, a in zip(geoms, along, strict=True)}
     travel = {int(g): abs(float(dv @ y)) for g, dv in zip(geoms, delta, strict=True)}
+    # The geoms that travel farthest are sided by their motion; every other finger geom by
+    # where it lies, beyond or short of the midplane between them: a linkage's knuckle that
+    # swings outwards while its finger closes presses from the side it is on.
+    top = max(travel.values())
+    leaders = {g: s for g, s in by_motion.items() if travel[g] >= FINGERTIP_TRAVEL * top}
+    side = dict(by_motion)
+    if len(set(leaders.values())) == 2:
+        where = {int(g): float(c @ y) for g, c in zip(geoms, c_open[geoms], strict=True)}
+        mid = 0.5 * sum(
+            float(np.mean([where[g] for g, s in leaders.items() if s == k])) for k in (1, -1)
+        )
+        side = {g: leaders.get(g, 1 if where[g] > mid else -1) for g in by_motion}
     if len(set(side.values())) < 2:
         raise _Problem(
             "pads",
@@ -626,35 +664,28 @@ def _aabb_G(
 def _probe_positions(rig: _Rig, axes: _Axes, half: np.ndarray) -> list[np.ndarray]:
     """Probe centres in B: between the fingertips, from their distal end towards the palm.
 
-    Fingertips are the finger geoms that travel at least :data:`FINGERTIP_TRAVEL` of their
-    side's largest travel. The probe is centred between their inner faces along y and on their
-    mean x; it steps by its height from flush with the fingertips' distal end over the brick's
-    height, stopping short of the palm (geoms that do not move).
+    The probe steps by its height from flush with the fingers' distal end (the nearer of the
+    two sides' farthest geoms along the approach) over the brick's height, stopping short of
+    the palm (geoms that do not move). At each step only the finger geoms level with the probe
+    (overlapping its height and its length) bound it: the probe is centred between the two
+    sides' innermost of them, and a step where they do not open wider than the brick (a
+    knuckle nearer the palm, a finger's crossbar) or where one side has none is skipped.
 
     Raises:
-        _Problem: The fingertips do not open wider than the brick.
+        _Problem: No step has the fingers open wider than the brick.
     """
     R = axes.R_BG
-    tips: list[int] = []
-    for s in (1, -1):
-        members = [g for g, side in axes.side.items() if side == s]
-        top = max(axes.travel[g] for g in members)
-        tips += [g for g in members if axes.travel[g] >= FINGERTIP_TRAVEL * top]
-    boxes = {g: _aabb_G(rig, g, R, np.zeros(3)) for g in tips}
-    inner_pos = min(c[1] - h[1] for g, (c, h) in boxes.items() if axes.side[g] == 1)
-    inner_neg = max(c[1] + h[1] for g, (c, h) in boxes.items() if axes.side[g] == -1)
-    if inner_pos - inner_neg <= 2.0 * half[1]:
-        raise _Problem(
-            "mjcf",
-            f"the gripper cannot open wider than the brick: its fingertips open to "
-            f"{(inner_pos - inner_neg) * 1000:.1f} mm, the brick is {2000 * half[1]:.1f} mm wide; "
-            f"valid: a gripper that opens wider than the brick",
-        )
+    boxes = {g: _aabb_G(rig, g, R, np.zeros(3)) for g in axes.side}
     distal = min(
         max(c[2] + h[2] for g, (c, h) in boxes.items() if axes.side[g] == s) for s in (1, -1)
     )
-    x_c = float(np.mean([c[0] for c, _ in boxes.values()]))
-    y_c = 0.5 * (inner_pos + inner_neg)
+    reach = distal - 2.0 * half[2]
+    near_tip = {g: c for g, (c, h) in boxes.items() if c[2] + h[2] > reach}
+    x_c = float(np.mean([c[0] for c in near_tip.values()]))
+    y_c = 0.5 * sum(
+        float(np.mean([c[1] for g, c in near_tip.items() if axes.side[g] == s] or [0.0]))
+        for s in (1, -1)
+    )
     palm = -np.inf
     for g in map(int, rig.geoms):
         if rig.moving_body[rig.model.geom_bodyid[g]]:
@@ -662,11 +693,35 @@ def _probe_positions(rig: _Rig, axes: _Axes, half: np.ndarray) -> list[np.ndarra
         c, h = _aabb_G(rig, g, R, np.zeros(3))
         if abs(c[0] - x_c) < h[0] + half[0] and abs(c[1] - y_c) < h[1] + half[1]:
             palm = max(palm, c[2] + h[2])
-    out = []
+    out, widest = [], -np.inf
     z = distal - 0.5 * PROBE_HEIGHT
-    while z >= distal - 2.0 * half[2] and z - 0.5 * PROBE_HEIGHT > palm + 1e-3:
-        out.append(R @ np.array([x_c, y_c, z]))
-        z -= PROBE_HEIGHT
+    while z >= reach and z - 0.5 * PROBE_HEIGHT > palm + 1e-3:
+        level = [
+            g
+            for g, (c, h) in boxes.items()
+            if abs(c[2] - z) < h[2] + 0.5 * PROBE_HEIGHT and abs(c[0] - x_c) < h[0] + half[0]
+        ]
+        inner_pos = min(
+            (boxes[g][0][1] - boxes[g][1][1] for g in level if axes.side[g] == 1), default=np.inf
+        )
+        inner_neg = max(
+            (boxes[g][0][1] + boxes[g][1][1] for g in level if axes.side[g] == -1), default=-np.inf
+        )
+        z_here, z = z, z - PROBE_HEIGHT
+        if not (np.isfinite(inner_pos) and np.isfinite(inner_neg)):
+            continue
+        widest = max(widest, inner_pos - inner_neg)
+        if inner_pos - inner_neg > 2.0 * half[1]:
+            out.append(R @ np.array([x_c, 0.5 * (inner_pos + inner_neg), z_here]))
+    if not out:
+        opens = f"{1000 * widest:.1f} mm" if np.isfinite(widest) else "nothing facing each other"
+        raise _Problem(
+            "mjcf",
+            f"the gripper cannot open wider than the brick: its fingertips open to {opens} "
+            f"(the finger geoms facing each other within {2000 * half[2]:.0f} mm of their "
+            f"distal end), the brick is {2000 * half[1]:.1f} mm wide; valid: a gripper that "
+            f"opens wider than the brick",
+        )
     return out
 
 
@@ -788,6 +843,82 @@ def _midway(rig: _Rig, side_pads: tuple[list[int], list[int]], y_B: np.ndarray) 
     return np.where(np.abs(mid) < _SNAP, 0.0, np.round(mid, 9))
 
 
+def _reach_along(rig: _Rig, g: int, axis_B: np.ndarray) -> float:
+    """Farthest point [m] of geom ``g`` along ``axis_B`` (from B's origin): its vertices for a
+    mesh, its local bounding box otherwise (exact for a box)."""
+    m = rig.model
+    R = rig.geom_rot_B(g)
+    c = rig.geom_centres_B()[g]
+    u = R.T @ axis_B
+    mesh = int(m.geom_dataid[g])
+    if int(m.geom_type[g]) == int(mujoco.mjtGeom.mjGEOM_MESH) and mesh >= 0:
+        adr, num = m.mesh_vertadr[mesh], m.mesh_vertnum[mesh]
+        return float(c @ axis_B + np.max(m.mesh_vert[adr : adr + num] @ u))
+    lo, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+    return float(c @ axis_B + lo @ u + np.abs(u) @ h)
+
+
+def _grasp_depth(
+    rig: _Rig,
+    open_state: np.ndarray,
+    tcp_B: np.ndarray,
+    R_BG: np.ndarray,
+    half: np.ndarray,
+) -> np.ndarray:
+    """The tool point moved along the approach, away from the palm, as far as a grasp needs.
+
+    Midway between the pads is where the pads' centres hold the brick's; a grasp also needs
+    the fingers' farthest point at least :data:`TIP_CLEARANCE` short of the brick's far face,
+    which rests on a floor, when open, and :data:`GRIP_TIP_CLEARANCE` as they are now (closed
+    on the probe or the brick, at the brick's width: a linkage's fingertips move along the
+    approach as it closes); and the open gripper's palm (its geoms that do not move) clear of
+    the brick: a palm reaching between short pads. Fingers that touch the brick open are not
+    moved away from: that gripper does not open around it (:func:`_squeeze`). When either
+    fails at the midpoint the tool point moves towards the fingertips until both hold (the
+    palm by :data:`PALM_CLEARANCE`), and the pads hold the brick nearer the face by the palm.
+    """
+    z_B = R_BG[:, 2]
+    entry = rig.state()
+    placed = dict(rig.placed)
+    shift = 0.0
+    for state, clearance in ((open_state, TIP_CLEARANCE), (entry, GRIP_TIP_CLEARANCE)):
+        rig.restore(state)
+        reach = max(_reach_along(rig, int(g), z_B) for g in rig.geoms)
+        shift = max(shift, reach + clearance - half[2] - float(tcp_B @ z_B))
+    rig.restore(open_state)
+
+    def touches(s: float, margin: float) -> bool:
+        rig.place_box("brick", tcp_B + s * z_B, R_BG)
+        g = rig.box_geoms["brick"]
+        before = float(rig.model.geom_margin[g])
+        rig.model.geom_margin[g] = margin
+        mujoco.mj_forward(rig.model, rig.data)
+        hit = False
+        for c in rig.data.contact[: rig.data.ncon]:
+            pair = (int(c.geom1), int(c.geom2))
+            other = pair[1] if pair[0] == g else pair[0]
+            palm = not rig.moving_body[rig.model.geom_bodyid[other]]
+            hit = hit or (g in pair and palm and c.dist < margin)
+        rig.model.geom_margin[g] = before
+        rig.place_box(None)
+        return hit
+
+    if touches(shift, 0.0):
+        lo, hi = shift, shift + 2.0 * half[2] + rig.scale
+        if touches(hi, PALM_CLEARANCE):
+            rig.restore(entry)
+            rig.placed = placed
+            return tcp_B  # nothing clears it: _squeeze says what touches
+        for _ in range(DEPTH_STEPS):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if touches(mid, PALM_CLEARANCE) else (lo, mid)
+        shift = hi
+    out = tcp_B + shift * z_B
+    rig.restore(entry)
+    rig.placed = placed
+    return np.where(np.abs(out) < _SNAP, 0.0, np.round(out, 9))
+
+
 def _squeeze(
     rig: _Rig, open_state: np.ndarray, u_closed: np.ndarray, pos_B: np.ndarray, R_BG: np.ndarray
 ) -> None:
@@ -796,6 +927,14 @@ def _squeeze(
     rig.place_box("brick", pos_B, R_BG)
     if rig.box_contacts("brick"):
         touched = ", ".join(sorted(rig.name(g) for g in rig.box_contacts("brick")))
+        if all(rig.moving_body[rig.model.geom_bodyid[g]] for g in rig.box_contacts("brick")):
+            width = 2000.0 * float(rig.model.geom_size[rig.box_geoms["brick"], 1])
+            raise _Problem(
+                "mjcf",
+                f"the gripper cannot open wider than the brick: open, its fingers touch a "
+                f"brick centred on its tool point ({touched}), the brick is {width:.1f} mm "
+                f"wide; valid: a gripper that opens wider than the brick",
+            )
         raise _Problem(
             "mjcf",
             f"the open gripper already touches a brick centred on its tool point ({touched}); "
@@ -822,10 +961,14 @@ class _Actions:
         self.fractions, self.gaps = fractions, gaps
         self.u_open, self.u_closed = u_open, u_closed
         self.open_width = min(float(gaps[-1]), GRASP_OPEN_WIDTH)
+        self.squeeze_width = float(gaps[0])
+        self.last: tuple[float, list[float], float] = (math.nan, [], math.nan)
 
     def ctrl(self, width: float) -> np.ndarray:
         """Command for gap ``width`` [m] (as :meth:`GripperCalibration.ctrl_for_width`)."""
         s = float(np.clip(np.interp(width, self.gaps, self.fractions), 0.0, 1.0))
+        if width <= self.squeeze_width:
+            s = 0.0
         return self.u_closed + s * (self.u_open - self.u_closed)
 
     def gap(self) -> float:
@@ -860,7 +1003,9 @@ class _Actions:
                 steady_since = math.inf
             elif not math.isfinite(steady_since):
                 steady_since = t
+            speed = abs(gap - last) / rig.model.opt.timestep if math.isfinite(last) else math.nan
             last = gap
+        self.last = (duration, per_side, speed)
         return steady_since
 
     def released_at(self, squeezed: np.ndarray, duration: float, clear_gap: float) -> float:
@@ -871,9 +1016,10 @@ class _Actions:
         return math.inf
 
     @staticmethod
-    def shortest(done_at: Callable[[float], float], what: str) -> float:
+    def shortest(done_at: Callable[[float], float], what: str, measured: str = "") -> float:
         """The shortest ramp T (a multiple of :data:`ACTION_RESOLUTION`) with
-        ``done_at(T) <= T - ACTION_HOLD``: doubling, then bisection."""
+        ``done_at(T) <= T - ACTION_HOLD``: doubling, then bisection. ``measured`` says what
+        the longest ramp achieved, in the error."""
 
         def ok(k: int) -> bool:
             T = k * ACTION_RESOLUTION
@@ -886,7 +1032,9 @@ class _Actions:
                 raise _Problem(
                     "mjcf",
                     f"the gripper does not {what} within {MAX_ACTION_TIME:g} s of a ramped "
-                    f"command; valid: a gripper that closes and opens within that",
+                    f"command{measured}; valid: a gripper that closes and opens within that, "
+                    f"or set [gripper] closed_command (a command that squeezes sooner) or "
+                    f"open_command",
                 )
             hi = min(2 * hi, k_max)
         lo = hi // 2  # not ok (or 0)
@@ -897,6 +1045,54 @@ class _Actions:
             else:
                 lo = mid
         return round(hi * ACTION_RESOLUTION, 9)
+
+
+def _close_time(
+    actions: _Actions, open_on_brick: np.ndarray, squeeze: np.ndarray, width: float
+) -> tuple[float, float]:
+    """The close time [s] and the squeeze width [m] (:attr:`GripperCalibration.squeeze_width`).
+
+    A plan ramps the commanded gap to 0 through the gap map, so the closed command arrives
+    only as the ramp ends, or never: where the free fingers pass each other (a negative
+    closed width) a gap of 0 is a command short of closed, and a gripper without a force range
+    that saturates (its squeeze the gain times the command's travel past the brick: robosuite's
+    Robotiq 140) squeezes with a fraction of its squeeze; a squeeze that builds through a
+    compliant linkage after the command arrives (the xArm gripper's soft loop constraints, 0.3
+    s from a step) is not steady by the ramp's end. Such a gripper is given the closed command
+    as soon as the commanded gap reaches the brick's width ``width``, and measured again.
+    """
+    what = "close on a brick-sized box"
+    try:
+        return actions.shortest(
+            lambda T: actions.grip_steady_at(open_on_brick, T, squeeze), what
+        ), actions.squeeze_width
+    except _Problem:
+        first = actions.last
+    actions.squeeze_width = width
+
+    def said(last: tuple[float, list[float], float]) -> str:
+        T, per_side, speed = last
+        return (
+            f"{', '.join(f'{f:.3g}' for f in per_side)} N at the end of a {T:g} s ramp, "
+            f"the gap changing by {1000 * speed:.2g} mm/s"
+        )
+
+    try:
+        return actions.shortest(
+            lambda T: actions.grip_steady_at(open_on_brick, T, squeeze), what
+        ), width
+    except _Problem:
+        measured = (
+            f": held closed, the pads squeeze the box with "
+            f"{', '.join(f'{f:.3g}' for f in squeeze)} N a side (needed: "
+            f"{100 * GRIP_FORCE_SHARE:g} % of that, the gap still to "
+            f"{1000 * STEADY_GAP_SPEED:g} mm/s, {1000 * ACTION_HOLD:g} ms before the ramp "
+            f"ends); the ramp reached {said(first)}, and closed once the commanded gap "
+            f"reaches the brick's width {said(actions.last)}"
+        )
+    return actions.shortest(
+        lambda T: actions.grip_steady_at(open_on_brick, T, squeeze), what, measured
+    ), width
 
 
 def calibrate_gripper(
@@ -1005,6 +1201,7 @@ def _calibrate(
         positions = _probe_positions(rig, axes, half)
         side_pads, _ = _find_pads(rig, axes, open_state, u_closed, positions, named)
         tcp_B = _midway(rig, side_pads, y_B)
+        tcp_B = _grasp_depth(rig, open_state, tcp_B, R_BG, half)
     else:
         side_pads = ([], [])
     for _ in range(PAD_ITERATIONS):
@@ -1026,6 +1223,7 @@ def _calibrate(
         side_pads = found
         if not fixed_tcp:
             tcp_B = _midway(rig, side_pads, y_B)
+            tcp_B = _grasp_depth(rig, open_state, tcp_B, R_BG, half)
     pos_pads, neg_pads = side_pads
 
     # Squeeze with stiff pads: normal forces per side, the gap, and the tool point again.
@@ -1046,6 +1244,7 @@ def _calibrate(
     gap_on_brick = _gap(rig, side_pads, faces, y_B)
     if not fixed_tcp:
         tcp_B = _midway(rig, side_pads, y_B)
+        tcp_B = _grasp_depth(rig, open_state, tcp_B, R_BG, half)
 
     # Gap map: closed to open, fingers free.
     rig.place_box(None)
@@ -1073,6 +1272,16 @@ def _calibrate(
             f"gripper that opens wider than the brick",
         )
 
+    narrowest = 2.0 * float(min(half[0], half[1]))
+    if gap_arr[-1] < narrowest + 2.0 * GRASP_PAD_CLEARANCE:
+        raise _Problem(
+            "mjcf",
+            f"the gripper opens to {1000 * gap_arr[-1]:.1f} mm, and a grasp needs the brick's "
+            f"{1000 * narrowest:.1f} mm plus {1000 * GRASP_PAD_CLEARANCE:g} mm beside each face; "
+            f"valid: a gripper that opens to at least "
+            f"{1000 * (narrowest + 2 * GRASP_PAD_CLEARANCE):.1f} mm",
+        )
+
     # Action times: the plan's ramps of the commanded gap, closing on the box and opening.
     actions = _Actions(rig, side_pads, faces, y_B, fractions, gap_arr, u_open, u_closed)
     rig.restore(open_state)
@@ -1081,9 +1290,7 @@ def _calibrate(
     open_on_brick = rig.state()  # (the state holds the box's mocap pose)
     _squeeze(rig, open_state, u_closed, tcp_B, R_BG)
     squeezed = rig.state()
-    close_time = actions.shortest(
-        lambda T: actions.grip_steady_at(open_on_brick, T, per_side), "close on a brick-sized box"
-    )
+    close_time, squeeze_width = _close_time(actions, open_on_brick, per_side, width)
     clear = min(RELEASE_CLEARANCE, 0.25 * (actions.open_width - width))
     open_time = actions.shortest(
         lambda T: actions.released_at(squeezed, T, width + 2.0 * clear),
@@ -1113,6 +1320,7 @@ def _calibrate(
         sweep_qpos=np.array(qpos),
         open_width=float(gap_arr[-1]),
         closed_width=float(gap_arr[0]),
+        squeeze_width=squeeze_width,
         pads=(tuple(rig.name(g) for g in pos_pads), tuple(rig.name(g) for g in neg_pads)),
         pad_faces=faces,
         pos_BG=tcp_B,
@@ -1129,6 +1337,12 @@ def _calibrate(
         sim_time=rig.sim_time,
     )
 
+
+GRASP_PAD_CLEARANCE = 0.006
+"""Gap a grasp leaves between each open pad and the brick's face [m]: the planner's
+``pickplace.planning.candidates.PAD_CLEARANCE`` (not imported: planning imports the robot; a
+test holds them equal). A gripper that opens less than the brick plus this on each side has no
+grasp candidate, and is refused."""
 
 GRASP_OPEN_WIDTH = 0.10
 """Gap a gripper opens to around the brick for a grasp, at most [m]: 25 mm beside each face of

@@ -141,14 +141,15 @@ class Robot:
     def ctrl_for_width(self, width: float) -> np.ndarray:
         """Gripper command that holds the free fingers at gap ``width`` [m].
 
-        At or below ``closed_width`` it is the closed command (full squeeze on an object).
+        At or below the calibration's ``squeeze_width`` it is the closed command (full squeeze
+        on an object).
         """
         return self.calibration.ctrl_for_width(width)
 
     def ctrl_for_widths(self, widths: np.ndarray) -> np.ndarray:
         """:meth:`ctrl_for_width` of every entry of ``widths`` (k,) [m], shape (k, actuators)."""
         cal = self.calibration
-        s = np.clip(np.interp(widths, cal.sweep_gap, cal.sweep_fraction), 0.0, 1.0)
+        s = cal.fractions_for_widths(np.asarray(widths, dtype=float))
         return cal.closed_command + s[:, None] * (cal.open_command - cal.closed_command)
 
     def qpos_for_width(self, width: float) -> np.ndarray:

@@ -105,16 +105,36 @@ def _children(model: mujoco.MjModel) -> dict[int, list[int]]:
     return out
 
 
+def _subtree_joints(model: mujoco.MjModel, children: dict[int, list[int]]) -> np.ndarray:
+    """Number of joints of each body and every body below it."""
+    count = model.body_jntnum.astype(int).copy()
+    for b in range(model.nbody - 1, 0, -1):  # children come after their parents
+        count[model.body_parentid[b]] += count[b]
+    return count
+
+
 def _chain_end(model: mujoco.MjModel) -> int:
-    """The arm's last body: from the file's root body down while a body has one child (a
-    branch, e.g. a hand's fingers, ends the chain at the body it branches from)."""
+    """The arm's last body: from the file's root body down the branch that carries the arm.
+
+    A body with one child continues to it. Where the chain branches, it continues to the
+    child that has more joints below it than all the other children together (the arm, not a
+    head on one joint or a camera mount on none); where no child does (a hand's fingers,
+    alike), the chain ends at the body it branches from.
+    """
     children = _children(model)
     roots = children.get(0, [])
     if len(roots) != 1:
         return -1
+    below = _subtree_joints(model, children)
     b = roots[0]
-    while len(children.get(b, [])) == 1:
-        b = children[b][0]
+    while kids := children.get(b, []):
+        if len(kids) == 1:
+            b = kids[0]
+            continue
+        main = max(kids, key=lambda k: below[k])
+        if below[main] <= sum(below[k] for k in kids) - below[main]:
+            break
+        b = main
     return b
 
 
