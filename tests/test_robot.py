@@ -512,10 +512,3 @@ def test_a_gripper_that_opens_less_than_a_grasp_needs_is_refused_in_one_line(
     message = str(err.value)
     assert "\n" not in message and str(path) in message and "[gripper] mjcf" in message
     assert "opens to 60.0 mm" in message and "at least 62.0 mm" in message
-
-
-def test_the_calibrations_grasp_clearance_is_the_planners() -> None:
-    from pickplace.planning.candidates import PAD_CLEARANCE
-    from pickplace.robot.calibration import GRASP_PAD_CLEARANCE
-
-    assert GRASP_PAD_CLEARANCE == PAD_CLEARANCE

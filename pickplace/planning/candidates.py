@@ -33,14 +33,8 @@ import numpy as np
 import numpy.typing as npt
 from mink.lie import SE3, SO3
 
+from pickplace.robot.calibration import PAD_CLEARANCE
 from pickplace.world.scene import BinGeometry
-
-PAD_CLEARANCE = 0.006
-"""Gap between each open pad and the object's face it closes on [m]: twice the 3 mm by which
-the tool arrives off the planned pick at full speed (:class:`~pickplace.planning.plan.PlanConfig`'s
-``settle_time``), so a pad never lands on the object's top. The gripper opens to the object's
-width plus this on each side, no wider: the less the fingers open, the nearer a wall the object
-can lie."""
 
 GRASP_TILTS = (0.0, math.radians(15.0), math.radians(30.0))
 """Tilts of the approach from vertical about the closing axis [rad], each tried either way;

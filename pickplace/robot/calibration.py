@@ -139,7 +139,7 @@ TIP_CLEARANCE = 0.008
 """The open fingers' farthest point along the approach stays this far [m] short of the far face
 of a brick centred on the tool point: the pre-flight's 5 mm clearance from the floor the brick
 rests on, plus the 3 mm by which the tool arrives off the planned pick at full speed
-(``pickplace.planning.candidates.PAD_CLEARANCE``) ..."""
+(:data:`PAD_CLEARANCE`) ..."""
 
 GRIP_TIP_CLEARANCE = 0.005
 """... and the gripping fingers' this far [m]: the pre-flight's 5 mm alone, the tool having
@@ -1273,13 +1273,13 @@ def _calibrate(
         )
 
     narrowest = 2.0 * float(min(half[0], half[1]))
-    if gap_arr[-1] < narrowest + 2.0 * GRASP_PAD_CLEARANCE:
+    if gap_arr[-1] < narrowest + 2.0 * PAD_CLEARANCE:
         raise _Problem(
             "mjcf",
             f"the gripper opens to {1000 * gap_arr[-1]:.1f} mm, and a grasp needs the brick's "
-            f"{1000 * narrowest:.1f} mm plus {1000 * GRASP_PAD_CLEARANCE:g} mm beside each face; "
+            f"{1000 * narrowest:.1f} mm plus {1000 * PAD_CLEARANCE:g} mm beside each face; "
             f"valid: a gripper that opens to at least "
-            f"{1000 * (narrowest + 2 * GRASP_PAD_CLEARANCE):.1f} mm",
+            f"{1000 * (narrowest + 2 * PAD_CLEARANCE):.1f} mm",
         )
 
     # Action times: the plan's ramps of the commanded gap, closing on the box and opening.
@@ -1338,11 +1338,14 @@ def _calibrate(
     )
 
 
-GRASP_PAD_CLEARANCE = 0.006
-"""Gap a grasp leaves between each open pad and the brick's face [m]: the planner's
-``pickplace.planning.candidates.PAD_CLEARANCE`` (not imported: planning imports the robot; a
-test holds them equal). A gripper that opens less than the brick plus this on each side has no
-grasp candidate, and is refused."""
+PAD_CLEARANCE = 0.006
+"""Gap between each open pad and the object's face it closes on [m]: twice the 3 mm by which
+the tool arrives off the planned pick at full speed (:class:`~pickplace.planning.plan.PlanConfig`'s
+``settle_time``), so a pad never lands on the object's top. The gripper opens to the object's
+width plus this on each side, no wider: the less the fingers open, the nearer a wall the object
+can lie. The planner's grasp candidates (:mod:`pickplace.planning.candidates`) use it; a
+gripper that opens less than the brick plus this on each side has no candidate, and is refused
+here."""
 
 GRASP_OPEN_WIDTH = 0.10
 """Gap a gripper opens to around the brick for a grasp, at most [m]: 25 mm beside each face of
