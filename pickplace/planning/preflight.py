@@ -217,8 +217,11 @@ class Preflight:
         width_held = grasp_width(plan, sc)
         held = (phases.grip_closed, phases.release) if phases and X_GO is not None else None
         X_WO_end = X_WO_goal if X_WO_goal is not None else X_WO_start
-        pair_kind = self._pair_kinds(X_WO_start, X_WO_end)
+        pair_kind = self.pair_kinds(X_WO_start, X_WO_end)
         command, sample = self.controller.command, traj.sample
+        # A C-space motion's joint path steers the controller's null space (posture).
+        joints = traj.joint_sample if traj.has_joint_segments else None
+        following = False
         check_plan_duration(traj.end_time)
         n = math.floor(traj.end_time / dt + 1e-9) + 1
         times = np.arange(n) * dt
@@ -238,6 +241,11 @@ class Preflight:
             x, V, width = sample(t)
             if midpoint:  # the plan's velocity at the middle of the tick
                 V = sample(t + half_dt)[1]
+            if joints is not None:
+                js = joints(t + half_dt if midpoint else t)
+                if js is not None or following:
+                    self.controller.follow_joints(*(js if js is not None else (None, None)))
+                following = js is not None
             res = command(q, x, V)
             q_path[i], qdot_path[i], J_path[i] = q, res.qdot, res.J_WG
             is_held = held is not None and held[0] <= t < held[1]
@@ -253,6 +261,8 @@ class Preflight:
                     end = i + 1
                     break
             q = q + res.qdot * dt
+        if following:
+            self.controller.follow_joints(None)
         problems = [
             p for p in (found, *self._path_problems(times, q_path, qdot_path, J_path, end)) if p
         ]
@@ -391,7 +401,7 @@ class Preflight:
         mujoco.mj_kinematics(m, d)
         mujoco.mj_collision(m, d)
 
-    def _pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
+    def pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
         """Per geom pair: 1 robot-world, 2 brick-world (not a geom it rests against at the
         start or the end: within the clearance of it there), 0 not checked; shape
         (ngeom, ngeom), symmetric."""
@@ -412,6 +422,22 @@ class Preflight:
                 if brick in (a, b):
                     kinds[a, b] = kinds[b, a] = 0  # the brick rests against it
         return kinds
+
+    def clearance(
+        self, q: np.ndarray, width: float, X_WO: SE3, pair_kind: np.ndarray, held: bool
+    ) -> tuple[float, tuple[str, str, tuple[float, float, float]] | None]:
+        """The pre-flight's collision check at one configuration: the smallest robot-world
+        (and, if ``held``, brick-world) distance [m], capped at the detection distance, with
+        its pair of geom names and point in world [m] (None when nothing is that near).
+
+        Args:
+            q: Arm joint positions [rad].
+            width: The fingers' gap [m].
+            X_WO: The brick's pose in world.
+            pair_kind: Which pairs count (:meth:`pair_kinds`).
+            held: Whether the brick is held (its pairs count too).
+        """
+        return self._closest(q, width, X_WO, pair_kind, held)
 
     def _closest(
         self, q: np.ndarray, width: float, X_WO: SE3, pair_kind: np.ndarray, held: bool

@@ -541,7 +541,9 @@ def retime(
             place_reached=moved(phases.place_reached),
             release=moved(phases.release),
         )
-    trajectory = PoseTrajectory(retimed, path_plan.trajectory.profile, laws)
+    trajectory = PoseTrajectory(
+        retimed, path_plan.trajectory.profile, laws, path_plan.trajectory.joint_segments
+    )
     return Plan(trajectory, new_phases, path_plan.X_OG)
 
 

@@ -205,6 +205,7 @@ class Simulation:
         self._check_qacc = bool(autoreset_off)
         self._sample = task.plan.trajectory.sample
         self._command = controller.command
+        self._following = False  # the controller follows a C-space motion's joint path
 
         horizon = task.trajectory.end_time + self.criteria.settle_time + self.criteria.failure_grace
         self.max_ticks = int(np.ceil(horizon / self.dt)) + 2
@@ -403,9 +404,17 @@ class Simulation:
         dynamics = self._dynamics if self._use_dynamics else None
         q_cmd = self.q_cmd
         qdot_prev = log.qdot_cmd[k0 - 1] if k0 > 0 else self._zero_qdot
+        trajectory = self.task.trajectory
+        # A C-space motion's joint path steers the controller's null space (posture).
+        joints = trajectory.joint_sample if trajectory.has_joint_segments else None
         for k in range(k0, k1):
             t = k * dt
             x_plan, V_plan, width = sample(t)
+            if joints is not None:
+                js = joints(t)
+                if js is not None or self._following:
+                    self.controller.follow_joints(*(js if js is not None else (None, None)))
+                self._following = js is not None
             t0 = time.perf_counter_ns()
             res = command(q_cmd, x_plan, V_plan)
             log.ik_us[k] = (time.perf_counter_ns() - t0) * 1e-3

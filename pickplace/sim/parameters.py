@@ -27,6 +27,7 @@ class Parameter:
         high: Largest valid value.
         meaning: What the value is, in one line.
         grid_only: Whether only a grid of values is allowed (a discrete parameter).
+        integer: Whether every value must be a whole number (a count).
     """
 
     name: str
@@ -35,6 +36,7 @@ class Parameter:
     high: float
     meaning: str
     grid_only: bool = False
+    integer: bool = False
 
     def __post_init__(self) -> None:
         """Check that the bounds are finite and ordered."""
@@ -47,7 +49,8 @@ class Parameter:
     def describe(self) -> str:
         """``name [unit] in [low, high]``, as listed in error messages."""
         grid = ", grid only" if self.grid_only else ""
-        return f"{self.name} [{self.unit}] in [{self.low:g}, {self.high:g}]{grid}"
+        whole = ", whole numbers" if self.integer else ""
+        return f"{self.name} [{self.unit}] in [{self.low:g}, {self.high:g}]{grid}{whole}"
 
 
 PARAMETERS: dict[str, Parameter] = {
@@ -83,6 +86,29 @@ PARAMETERS: dict[str, Parameter] = {
             *_CONTROL_RATE_HZ,
             "IK rate; must divide the physics rate (100, 125, 250, 500 Hz at 2 ms steps)",
             grid_only=True,
+        ),
+        Parameter(
+            "divider_height",
+            "m",
+            0.0,
+            0.6,
+            "height of a divider wall between the bins (0: none)",
+        ),
+        Parameter(
+            "shelf_height",
+            "m",
+            0.0,
+            1.2,
+            "height of the underside of a shelf over bin 2 (0: none)",
+        ),
+        Parameter(
+            "obstacle_boxes",
+            "-",
+            0.0,
+            6.0,
+            "number of boxes standing at random in the workspace, drawn from the seed",
+            grid_only=True,
+            integer=True,
         ),
     )
 }
