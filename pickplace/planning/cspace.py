@@ -142,6 +142,11 @@ class JointPath:
         self._d = (M[1:] - M[:-1]) / (6.0 * hh)
         self._s_list = self._s.tolist()
 
+    def interval(self, u: float) -> int:
+        """Index i of the knot interval [knot i, knot i + 1] that holds ``u``."""
+        s = min(max(u, 0.0), 1.0) * self.length
+        return min(max(bisect.bisect_right(self._s_list, s) - 1, 0), len(self._a) - 1)
+
     def at(self, u: float) -> tuple[FloatArray, FloatArray]:
         """(q [rad], dq/du [rad]) at ``u`` (clamped to [0, 1])."""
         s = min(max(u, 0.0), 1.0) * self.length
@@ -412,7 +417,7 @@ def _smoothed(
             return None
         # The knot interval where the spline leaves the free space: the polyline's edge there
         # (free, OMPL checked it) gets its midpoint as a knot.
-        i = min(max(bisect.bisect_right(path._s_list, bad * path.length) - 1, 0), len(knots) - 2)
+        i = path.interval(bad)
         mid = 0.5 * (knots[i] + knots[i + 1])
         knots = np.insert(knots, i + 1, mid, axis=0)
     return None

@@ -29,7 +29,8 @@ from pickplace.sim import faults
 from pickplace.sim.catalog import CATALOG, ScenarioInfo
 from pickplace.sim.goals import PlaceGoal, ReachGoal
 from pickplace.sim.task import Fault, Task
-from pickplace.world.obstacles import ObstacleCell, draw_boxes
+from pickplace.world.cell import ObstacleCell
+from pickplace.world.obstacles import draw_boxes
 from pickplace.world.placements import (
     BrickPlacement,
     brick_on_floor,
@@ -258,9 +259,9 @@ class Scenario(ScenarioInfo):
 
 # pick-place-obstacles: the divider's height [m], the chance of a shelf and its height [m],
 # the most boxes; drawn from their own stream of the seed ("cell" in ASCII).
-CELL_DIVIDER_HEIGHT = (0.2, 0.45)
+CELL_DIVIDER_HEIGHT = (0.22, 0.28)
 CELL_SHELF_CHANCE = 0.5
-CELL_SHELF_HEIGHT = (0.55, 0.8)
+CELL_SHELF_HEIGHT = (0.8, 0.95)
 CELL_MAX_BOXES = 3
 _CELL_STREAM = 0x63656C6C
 

@@ -54,7 +54,8 @@ from mink.lie import SE3
 from pickplace.sim.faults import BrickShifted
 from pickplace.sim.task import Task
 from pickplace.sim.vary import ParameterDraw, parameter_stream
-from pickplace.world.obstacles import ObstacleCell, draw_boxes, with_obstacles
+from pickplace.world.cell import ObstacleCell
+from pickplace.world.obstacles import draw_boxes, with_obstacles
 from pickplace.world.scene import Scene
 
 # Parameters that change the scene (the others: the task, or the run request's own fields).

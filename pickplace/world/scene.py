@@ -29,7 +29,7 @@ from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from pickplace.robot.registry import DEFAULT_WORLD
 
 if TYPE_CHECKING:
-    from pickplace.world.obstacles import ObstacleCell
+    from pickplace.world.cell import ObstacleCell
 
 __all__ = [
     "BRICK_MASS_RANGE",
@@ -249,7 +249,7 @@ class Scene:
             sensors (:func:`pickplace.world.obstacles.with_obstacles` adds to a copy of it);
             never changed.
         obstacles: The obstacles added to the world
-            (:class:`~pickplace.world.obstacles.ObstacleCell`), or None.
+            (:class:`~pickplace.world.cell.ObstacleCell`), or None.
     """
 
     model: mujoco.MjModel
