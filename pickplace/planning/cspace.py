@@ -267,14 +267,9 @@ def plan_joint_path(
     Raises:
         Interrupted: A stop request arrived (:func:`pickplace.signals.stop_point`).
     """
-    from ompl import base as ob
-    from ompl import geometric as og
-    from ompl import util as ou
-
     cfg = config or CSpaceConfig()
     t0 = time.perf_counter()
     deadline = t0 + cfg.budget_s
-    n = len(q_start)
     w = np.asarray(weights, dtype=np.float64)
     counts = {"checks": 0}
     blockers: dict[tuple[str, str], int] = {}
@@ -301,53 +296,25 @@ def plan_joint_path(
                 counts["checks"],
             )
 
-    ou.setLogLevel(ou.LOG_NONE)
-    ou.RNG.setSeed(int(seed) % (2**31 - 1) or 1)
-    space = ob.RealVectorStateSpace(n)
-    bounds = ob.RealVectorBounds(n)
-    for j in range(n):
-        bounds.setLow(j, float(q_low[j] * w[j]))
-        bounds.setHigh(j, float(q_high[j] * w[j]))
-    space.setBounds(bounds)
-    si = ob.SpaceInformation(space)
+    def expired() -> bool:
+        return bool(caught) or time.perf_counter() > deadline
 
-    def valid(state: object) -> bool:
+    def valid(q: np.ndarray) -> bool:
         if caught:
             return False
         if counts["checks"] % _STOP_CHECKS == 0:
             try:
                 stop_point()
-            except BaseException as exc:  # delivered after OMPL returns
-                caught.append(exc)
+            except BaseException as exc:  # raised after OMPL returns, without this frame
+                caught.append(exc.with_traceback(None))
                 return False
-        q = np.array([state[j] for j in range(n)]) / w  # type: ignore[index]
         return clear(q)
 
-    si.setStateValidityChecker(valid)
-    # OMPL checks motions at a fraction of the space's extent; an L2 step of check_step / √n
-    # bounds the scaled L1 step by check_step.
-    si.setStateValidityCheckingResolution(cfg.check_step / math.sqrt(n) / si.getMaximumExtent())
-    si.setup()
-    start, goal = si.allocState(), si.allocState()
-    for j in range(n):
-        start[j] = float(q_start[j] * w[j])
-        goal[j] = float(q_goal[j] * w[j])
-    pdef = ob.ProblemDefinition(si)
-    pdef.setStartAndGoalStates(start, goal)
-    planner = og.RRTConnect(si)
-    planner.setRange(cfg.planner_range)
-    planner.setProblemDefinition(pdef)
-    planner.setup()
-
-    def expired() -> bool:
-        return bool(caught) or time.perf_counter() > deadline
-
-    ptc = ob.PlannerTerminationCondition(expired)
-    status = planner.solve(ptc)
+    # OMPL's objects live in _rrt_connect's frame only, gone before anything is raised here.
+    vertices = _rrt_connect(q_start, q_goal, q_low, q_high, w, seed, cfg, valid, expired)
     if caught:
         raise caught[0]
-    exact = status.getStatus() == ob.PlannerStatus.EXACT_SOLUTION
-    if not exact:
+    if vertices is None:
         worst = max(blockers.items(), key=lambda kv: kv[1])[0] if blockers else ("?", "?")
         return CSpaceResult(
             None,
@@ -357,13 +324,6 @@ def plan_joint_path(
             time.perf_counter() - t0,
             counts["checks"],
         )
-    path = pdef.getSolutionPath()
-    og.PathSimplifier(si).simplify(path, ptc)
-    if caught:
-        raise caught[0]
-    vertices = (
-        np.array([[path.getState(i)[j] for j in range(n)] for i in range(path.getStateCount())]) / w
-    )
     lo, hi = np.asarray(q_low), np.asarray(q_high)
 
     def free(q: np.ndarray) -> bool:
@@ -383,6 +343,61 @@ def plan_joint_path(
             len(vertices),
         )
     return CSpaceResult(smooth, None, elapsed, counts["checks"], len(vertices))
+
+
+def _rrt_connect(
+    q_start: np.ndarray,
+    q_goal: np.ndarray,
+    q_low: np.ndarray,
+    q_high: np.ndarray,
+    w: np.ndarray,
+    seed: int,
+    cfg: CSpaceConfig,
+    valid: object,
+    expired: object,
+) -> np.ndarray | None:
+    """OMPL's RRT-Connect in the scaled joint space, then its path simplifier: the path's
+    vertices (m, n) [rad], or None without an exact solution before ``expired``."""
+    from ompl import base as ob
+    from ompl import geometric as og
+    from ompl import util as ou
+
+    assert callable(valid) and callable(expired)
+    n = len(q_start)
+    ou.setLogLevel(ou.LOG_NONE)
+    ou.RNG.setSeed(int(seed) % (2**31 - 1) or 1)
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for j in range(n):
+        bounds.setLow(j, float(q_low[j] * w[j]))
+        bounds.setHigh(j, float(q_high[j] * w[j]))
+    space.setBounds(bounds)
+    si = ob.SpaceInformation(space)
+    si.setStateValidityChecker(lambda state: valid(np.array([state[j] for j in range(n)]) / w))
+    # OMPL checks motions at a fraction of the space's extent; an L2 step of check_step / √n
+    # bounds the scaled L1 step by check_step.
+    si.setStateValidityCheckingResolution(cfg.check_step / math.sqrt(n) / si.getMaximumExtent())
+    si.setup()
+    start, goal = si.allocState(), si.allocState()
+    for j in range(n):
+        start[j] = float(q_start[j] * w[j])
+        goal[j] = float(q_goal[j] * w[j])
+    pdef = ob.ProblemDefinition(si)
+    pdef.setStartAndGoalStates(start, goal)
+    planner = og.RRTConnect(si)
+    planner.setRange(cfg.planner_range)
+    planner.setProblemDefinition(pdef)
+    planner.setup()
+    ptc = ob.PlannerTerminationCondition(lambda: bool(expired()))
+    status = planner.solve(ptc)
+    if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION or expired():
+        return None
+    path = pdef.getSolutionPath()
+    og.PathSimplifier(si).simplify(path, ptc)
+    if expired():
+        return None
+    states = [path.getState(i) for i in range(path.getStateCount())]
+    return np.array([[state[j] for j in range(n)] for state in states]) / w
 
 
 def _dedup(points: np.ndarray, weights: np.ndarray) -> np.ndarray:

@@ -1,11 +1,12 @@
 """Obstacles in the cell: a divider wall between the bins, a shelf over bin 2, random boxes.
 
-A :class:`~pickplace.world.cell.ObstacleCell` is a world parameter set: what stands in the cell besides the bins and
-the brick. :func:`with_obstacles` adds it to a loaded scene with :class:`mujoco.MjSpec` (new
-static bodies appended to the world body, after everything else, so every id of the robot,
-the bins and the brick stays what it was) and compiles it again; each obstacle is a collision
-geom of the world, with the bins' contact bits, so the pre-flight's collision check, the
-robot–world contact sensors (one per world body) and the run's collision check all see it.
+A :class:`~pickplace.world.cell.ObstacleCell` is a world parameter set: what stands in the
+cell besides the bins and the brick. :func:`with_obstacles` adds it to a loaded scene with
+:class:`mujoco.MjSpec` (new static bodies appended to the world body, after everything else,
+so every id of the robot, the bins and the brick stays what it was) and compiles it again;
+each obstacle is a collision geom of the world, with the bins' contact bits, so the
+pre-flight's collision check, the robot–world contact sensors (one per world body) and the
+run's collision check all see it.
 
 The geometry is stated here once, and derived from the scene (the bins' footprints, the arm's
 base axis):
