@@ -202,6 +202,8 @@ class CSpaceResult:
         time_s: Wall time spent [s].
         checks: Collision checks made.
         vertices: Vertices of OMPL's path after simplification (0 without one).
+        ompl_s: Wall time of OMPL's part, RRT-Connect and the simplifier [s] (the rest:
+            the start and goal checks and the spline's fit and checks).
     """
 
     path: JointPath | None
@@ -209,6 +211,7 @@ class CSpaceResult:
     time_s: float
     checks: int
     vertices: int = 0
+    ompl_s: float = 0.0
 
 
 def lever_arms(kinematics: ArmKinematics, q: np.ndarray, hand_reach: float) -> FloatArray:
@@ -311,7 +314,9 @@ def plan_joint_path(
         return clear(q)
 
     # OMPL's objects live in _rrt_connect's frame only, gone before anything is raised here.
+    t_ompl = time.perf_counter()
     vertices = _rrt_connect(q_start, q_goal, q_low, q_high, w, seed, cfg, valid, expired)
+    ompl_s = time.perf_counter() - t_ompl
     if caught:
         raise caught[0]
     if vertices is None:
@@ -323,6 +328,7 @@ def plan_joint_path(
             f"{clearance * 1000:.0f} mm of {worst[1]})",
             time.perf_counter() - t0,
             counts["checks"],
+            ompl_s=ompl_s,
         )
     lo, hi = np.asarray(q_low), np.asarray(q_high)
 
@@ -341,8 +347,9 @@ def plan_joint_path(
             elapsed,
             counts["checks"],
             len(vertices),
+            ompl_s,
         )
-    return CSpaceResult(smooth, None, elapsed, counts["checks"], len(vertices))
+    return CSpaceResult(smooth, None, elapsed, counts["checks"], len(vertices), ompl_s)
 
 
 def _rrt_connect(
