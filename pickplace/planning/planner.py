@@ -722,7 +722,7 @@ class PickPlacePlanner:
             low,
             high,
             self.lever_arms,
-            self.preflight.config.clearance,
+            self.preflight.config.clearance + self.cspace.extra_clearance,
             (self.seed * 7919 + self._attempts) & 0x7FFFFFFF,
             self.cspace,
         )
