@@ -438,7 +438,9 @@ def _smoothed(
         if expired():
             return None
         path = JointPath(knots, weights)
-        bad = _first_collision(path, weights, clear, cfg.check_step)
+        bad = _first_collision(path, weights, clear, cfg.check_step, expired)
+        if expired():
+            return None
         if bad is None:
             return path
         if len(knots) >= _MAX_KNOTS:
@@ -453,13 +455,16 @@ def _smoothed(
 
 
 def _first_collision(
-    path: JointPath, weights: np.ndarray, clear: object, step: float
+    path: JointPath, weights: np.ndarray, clear: object, step: float, expired: object
 ) -> float | None:
     """The first u at which ``path`` is not free, or None: checked at steps of u whose scaled
-    L1 length, by the path's local speed Σ w_j |dq_j/du|, is at most ``step``."""
-    assert callable(clear)
+    L1 length, by the path's local speed Σ w_j |dq_j/du|, is at most ``step`` (0 when
+    ``expired`` says the budget is spent)."""
+    assert callable(clear) and callable(expired)
     u = 0.0
     while True:
+        if expired():
+            return u
         q, dq_du = path.at(u)
         if not clear(q):
             return u
