@@ -140,7 +140,7 @@ def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
         default="pick-place",
         help="scenario name (default: pick-place; see pickplace scenarios)",
     )
-    p.add_argument("--controller", default="qp", help="qp (default), pinv or dls")
+    p.add_argument("--controller", default="qp", help="qp (default), qp-no-collision, pinv or dls")
     p.add_argument(
         "--seed", type=_seed, default=0, help="seed of randomised scenarios (default: 0)"
     )
@@ -185,6 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="IK rate [Hz], a whole number of physics steps in [100, 1000] (default: 100)",
     )
     run.add_argument("--pace", type=_finite_float, help="run at most this many times real time")
+    _add_attempts(run)
     run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     plan = sub.add_parser(
@@ -206,7 +207,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="pick-place-random",
         help="scenario name (default: pick-place-random; see pickplace scenarios)",
     )
-    sweep.add_argument("--controller", default=None, help="qp (default), pinv or dls")
+    sweep.add_argument(
+        "--controller", default=None, help="qp (default), qp-no-collision, pinv or dls"
+    )
     sweep.add_argument("--robot", default=None, help=ROBOT_HELP)
     sweep.add_argument(
         "--trials", type=_positive_int, default=20, help="number of trials (default: 20)"
@@ -251,6 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=100.0,
         help="IK rate [Hz] of every trial (default: 100; or --vary control_rate=a,b)",
     )
+    _add_attempts(sweep)
     sweep.add_argument(
         "--backend",
         choices=("process", "ray"),
@@ -273,6 +277,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sweep.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     return parser
+
+
+def _add_attempts(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--attempts",
+        type=_positive_int,
+        default=1,
+        metavar="N",
+        help="most attempts of a run, 1 to 10 (default: 1; or --vary attempts=a,b): after a "
+        "missed grasp or a drop the "
+        "arm stops, the brick is left to rest and the run plans again from where it lies",
+    )
 
 
 def plain_text(doc: str) -> str:
@@ -307,6 +323,7 @@ OPTION_OF_FIELD = {
     "pace": "--pace",
     "speed": "--speed",
     "address": "--address",
+    "attempts": "--attempts",
 }
 
 
@@ -509,6 +526,11 @@ def _human_summary(s: dict[str, Any]) -> str:
         f"{s['max_joint_speed_ratio']:.3f}, max tool position error "
         f"{s['max_position_error_m'] * 1000:.1f} mm"
     )
+    for r in s.get("replans") or []:
+        lines.append(
+            f"  replanned at t={r['t']:.2f} s (tick {r['tick']}) after {r['after']}: attempt "
+            f"{r['attempt']}, plan '{r['candidate']}'"
+        )
     failures = [e for e in s["events"] if e["kind"] == "failure"]
     if failures:
         e = failures[0]
@@ -559,6 +581,7 @@ def _cmd_run(args: argparse.Namespace, stop: InterruptHandler) -> int:
         connect=args.connect,
         control_rate_hz=args.control_rate,
         pace=args.pace,
+        attempts=args.attempts,
         observers=observers,
     )
     outcome = execute(req)
@@ -707,6 +730,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
         address=args.address,
         robot=args.robot or DEFAULT_ROBOT,
         trial_timeout_s=args.trial_timeout,
+        attempts=args.attempts,
     )
     resolved = req.validate()
     output = None

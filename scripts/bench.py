@@ -18,6 +18,9 @@ Targets (figures, not tests):
   wall that the Cartesian transfer runs into (0.26 m), and over pick-place-obstacles cells
   (seeds 90000…) the planning time's percentiles, the C-space planner's share and how many
   of its plannings found a path (figures, no target: the C-space budget is 2 s a candidate);
+- the qp collision limit's cost: the real-time factor of headless nominal runs with and
+  without it and their ratio, its per-tick broad phase and rows against mink's own (figures
+  without a target);
 - ``pickplace --help``, ``--version``, ``scenarios`` and ``robots`` each answer in <= 0.3 s
   (median wall time of a fresh process, and its CPU time, which the machine's load does not
   inflate; ``robots`` after its first call, which measures the robots once).
@@ -25,6 +28,7 @@ Targets (figures, not tests):
 Usage: python scripts/bench.py [--json] [--trials N] [--backend-trials N] [--rss-trials N]
        python scripts/bench.py --cli-only [--json]
        python scripts/bench.py --cspace-only [--json] [--cells N]
+       python scripts/bench.py --collision-only [--json] [--repeats N]
 """
 
 from __future__ import annotations
@@ -46,12 +50,12 @@ import mink
 import mujoco
 import numpy as np
 
+from pickplace.cache import CACHE_ENV
 from pickplace.control.controllers import QPController, make_controller
 from pickplace.errors import InvalidInputError
 from pickplace.geometry import pose_error_W
 from pickplace.planning.planner import PickPlacePlanner
 from pickplace.planning.timing import cycle_time_at_speed_limits, cycle_time_bound
-from pickplace.robot import calibration_cache
 from pickplace.robot.compose import clear_calibration_cache
 from pickplace.robot.registry import bundled_robots
 from pickplace.run.runner import RunRequest, prepare
@@ -156,11 +160,68 @@ def ik_ticks(states: np.ndarray, targets: np.ndarray, velocities: np.ndarray) ->
     }
 
 
+def collision_limit(repeats: int) -> dict[str, Any]:
+    """The qp collision limit's cost: the real-time factor of headless nominal runs with it
+    (``qp``) and without it (``qp-no-collision``), interleaved so that both see the same load,
+    their ratio; its per-tick cost on the run's own states (the broad phase, and the rows with
+    their narrow phase and Jacobians, against mink's own ``compute_qp_inequalities`` on the
+    same states) and how many pairs each tick reaches each stage."""
+    rtf: dict[str, list[float]] = {"qp": [], "qp-no-collision": []}
+    ik_us: dict[str, float] = {}
+    sim: Any = None
+    for _ in range(repeats):
+        for name in rtf:
+            _, _, run = prepare(RunRequest(controller=name))
+            t0 = time.perf_counter()
+            result = run.run()
+            wall = time.perf_counter() - t0
+            if not result.success:
+                raise RuntimeError(f"nominal run with {name} failed: {result.failure}")
+            rtf[name].append(result.sim_time_s / wall)
+            ik_us[name] = float(np.median(run.log.ik_us[: run.ticks]))
+            if name == "qp":
+                sim = run
+    ctrl = sim.controller
+    collision, kin = ctrl.collision, ctrl.kinematics
+    states = sim.log.q_cmd[: sim.ticks]
+    broad, rows, mink_rows, survivors, active = [], [], [], [], []
+    for q in states:
+        kin.update(q)
+        broad.append(median_us(partial(collision.candidates, kin.data), 5))
+        rows.append(median_us(partial(collision.rows, kin.data), 5))
+        survivors.append(collision.survivors)
+        active.append(collision.active)
+        mink_rows.append(
+            median_us(
+                lambda: [
+                    limit.compute_qp_inequalities(ctrl.configuration, ctrl.dt)
+                    for limit in collision.limits
+                ],
+                5,
+            )
+        )
+    with_limit = statistics.median(rtf["qp"])
+    without = statistics.median(rtf["qp-no-collision"])
+    return {
+        "realtime_factor_headless_collision_limit": with_limit,
+        "realtime_factor_headless_no_collision_limit": without,
+        "collision_limit_realtime_factor_ratio": with_limit / without,
+        "collision_limit_ik_tick_us_in_run": ik_us["qp"],
+        "collision_limit_off_ik_tick_us_in_run": ik_us["qp-no-collision"],
+        "collision_limit_pairs": collision.n_pairs,
+        "collision_limit_broad_phase_us": statistics.median(broad),
+        "collision_limit_rows_us": statistics.median(rows),
+        "collision_limit_rows_us_mink": statistics.median(mink_rows),
+        "collision_limit_broad_phase_survivors_mean": float(np.mean(survivors)),
+        "collision_limit_rows_mean": float(np.mean(active)),
+    }
+
+
 def controller_ticks(q: np.ndarray, x: np.ndarray, V: np.ndarray) -> dict[str, float]:
     """Whole controller ticks (FK, error, solve, status) of the three controllers."""
     scene = load_scene()
     out = {}
-    for name in ("qp", "pinv", "dls"):
+    for name in ("qp", "qp-no-collision", "pinv", "dls"):
         ctrl = make_controller(name, scene, 0.01)
         out[f"controller_tick_us_{name}"] = median_us(partial(ctrl.command, q, x, V))
     return out
@@ -359,9 +420,9 @@ def compose_times() -> dict[str, float]:
     worker pays). The disk cache is a temporary directory, so the user's is not touched."""
     load_scene()  # imports and first-call costs outside the measurement
     out = {}
-    saved = os.environ.get(calibration_cache.CACHE_ENV)
+    saved = os.environ.get(CACHE_ENV)
     with tempfile.TemporaryDirectory() as cache:
-        os.environ[calibration_cache.CACHE_ENV] = cache
+        os.environ[CACHE_ENV] = cache
         try:
             for name in bundled_robots():
                 clear_scene_cache()
@@ -379,9 +440,9 @@ def compose_times() -> dict[str, float]:
                 out[f"robot_compose_cached_s_{name}"] = float(second.stdout.split()[-1])
         finally:
             if saved is None:
-                os.environ.pop(calibration_cache.CACHE_ENV, None)
+                os.environ.pop(CACHE_ENV, None)
             else:
-                os.environ[calibration_cache.CACHE_ENV] = saved
+                os.environ[CACHE_ENV] = saved
     return out
 
 
@@ -470,10 +531,17 @@ def main(argv: list[str] | None = None) -> int:
         "--cspace-only", action="store_true", help="only the planning times with C-space paths"
     )
     parser.add_argument("--cells", type=int, default=30, help="obstacle cells planned")
+    parser.add_argument(
+        "--collision-only", action="store_true", help="only the qp collision limit's cost"
+    )
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
     if args.cspace_only:
         report.update(cspace_planning_times(args.cells))
+        print(json.dumps(report) if args.json else _table(report, {}))
+        return 0
+    if args.collision_only:
+        report.update(collision_limit(args.repeats))
         print(json.dumps(report) if args.json else _table(report, {}))
         return 0
     if args.cli_only:
@@ -517,6 +585,7 @@ def main(argv: list[str] | None = None) -> int:
     report["rrd_bytes_per_sim_second"] = statistics.median(sizes)
     report["control_tick_us_median_in_run"] = 1e6 / (report["realtime_factor_headless"] * 100.0)
     report.update(tick_breakdown())
+    report.update(collision_limit(args.repeats))
     report.update(ik_ticks(states, targets, velocities))
     report.update(controller_ticks(states[20], targets[20], velocities[20]))
     report["mj_step_us_holding_brick"] = mj_step_us()

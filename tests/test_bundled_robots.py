@@ -43,11 +43,6 @@ ROBOTS = bundled_robots()
 
 # What the Menagerie robots do not do yet, stated rather than skipped: each case must fail
 # (strict), so the mark goes the day the capability comes.
-STRETCH_ASSUMES_INLINE_AXES = pytest.mark.xfail(
-    strict=True,
-    reason="full_stretch_distance is off for Menagerie's iiwa14 and Panda: 2 mm inside it the "
-    "tool still falls 13 and 25 mm short (their kinematics are not handled yet)",
-)
 PINV_MEETS_A_JOINT_RANGE_FIRST = pytest.mark.xfail(
     strict=True,
     reason="on Menagerie's Panda, pinv at the singular reach runs a joint past its range "
@@ -138,15 +133,7 @@ def _reach_error(scene: Scene, target: SE3) -> float:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "robot",
-    _marked(
-        {
-            "menagerie-iiwa14-2f85": STRETCH_ASSUMES_INLINE_AXES,
-            "menagerie-panda-hand": STRETCH_ASSUMES_INLINE_AXES,
-        }
-    ),
-)
+@pytest.mark.parametrize("robot", ROBOTS)
 def test_full_stretch_is_where_the_tool_pointing_down_stops_reaching(robot: str) -> None:
     """2 mm inside the computed full stretch the tool reaches its pose exactly; 2 mm outside
     it falls short by about those 2 mm."""

@@ -13,7 +13,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parent.parent / "pickplace"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors", "geometry", "outfile", "signals"),
+    ("cache", "errors", "geometry", "outfile", "signals"),
     ("robot",),
     ("world",),
     ("control",),

@@ -796,7 +796,7 @@ def test_version_and_sweep_help(cli: Cli) -> None:
     text = " ".join(proc.stdout.split())
     for described in (
         "--scenario SCENARIO scenario name",
-        "--controller CONTROLLER qp (default), pinv or dls",
+        "--controller CONTROLLER qp (default), qp-no-collision, pinv or dls",
         "--trials TRIALS number of trials",
         "--seed SEED seed of the first trial",
         "--workers WORKERS parallel processes",

@@ -32,6 +32,7 @@ def _summary(sim: Simulation) -> dict[str, Any]:
         ("pick-place", "qp"),
         ("fault-knock", "qp"),
         ("fault-gripper-disabled", "qp"),
+        ("fault-obstacle", "qp"),  # the moved obstacle reaches the IK at the same tick
         ("singular-reach", "pinv"),
     ],
 )

@@ -14,6 +14,7 @@ from pickplace.errors import InvalidInputError, RecordingError
 from pickplace.sim.vary import ParameterDraw, VaryPlan, parse_vary
 from pickplace.sweep.bins import success_by_parameter
 from pickplace.sweep.recording import (
+    CALLOUT_OFFSET,
     CHART_HEIGHT,
     METRICS,
     ONE_ROW_OF_COUNTS,
@@ -21,6 +22,7 @@ from pickplace.sweep.recording import (
     RATE_LOW_COLOR,
     SUCCESS_COLOR,
     bin_outline_W,
+    callout_anchors_W,
     outcome_colors,
     rate_color,
     report_markdown,
@@ -261,14 +263,40 @@ def test_many_failures_are_labelled_but_labels_shown_only_when_few(
     trials, draws = synthetic_trials(scene, plan, range(30))
     report = sweep_report(SweepRequest(trials=len(trials), workers=1, vary=plan), trials, 1.0)
     write_sweep_recording(tmp_path / "many.rrd", trials, report, plan, draws, scene=scene)
-    many = read_entities(tmp_path / "many.rrd")["world/trials/dropped"].static
+    entities = read_entities(tmp_path / "many.rrd")
+    many = entities["world/trials/dropped"].static
     assert len(many["Points3D:labels"]) == 30 and many["Points3D:show_labels"] == [False]
+    assert "world/callouts/labels" not in entities  # 30 rows would not fit beside the bin
     few_report = sweep_report(SweepRequest(trials=3, workers=1, vary=plan), trials[:3], 1.0)
     write_sweep_recording(
         tmp_path / "few.rrd", trials[:3], few_report, plan, draws[:3], scene=scene
     )
-    few = read_entities(tmp_path / "few.rrd")["world/trials/dropped"].static
-    assert few["Points3D:show_labels"] == [True]
+    entities = read_entities(tmp_path / "few.rrd")
+    callouts = entities["world/callouts/labels"].static
+    assert callouts["Points3D:show_labels"] == [True]
+    assert sorted(callouts["Points3D:labels"]) == sorted(
+        f"dropped · seed {t['seed']}" for t in trials[:3]
+    )
+    (leaders,) = [v for k, v in entities["world/callouts/leaders"].static.items() if "strips" in k]
+    assert len(leaders) == 3
+
+
+def test_callouts_stand_in_one_column_beside_the_bin_a_row_apart_in_the_points_order(
+    scene: Scene,
+) -> None:
+    bin_ = scene.source_bin
+    hx, hy = bin_.inner_half_extents
+    rng = np.random.default_rng(7)
+    R_WB = bin_.X_WB.rotation().as_matrix()
+    p_B = np.column_stack([rng.uniform(-hx, hx, 12), rng.uniform(-hy, hy, 12), np.zeros(12)])
+    p_W = p_B @ R_WB.T + bin_.X_WB.translation()
+    anchors_B = (callout_anchors_W(bin_, p_W) - bin_.X_WB.translation()) @ R_WB
+    np.testing.assert_allclose(anchors_B[:, 0], -hx - CALLOUT_OFFSET)  # outside the -x wall
+    rows = np.sort(anchors_B[:, 1])
+    np.testing.assert_allclose(np.diff(rows), 2 * hy / 12)  # evenly spaced, one row each
+    assert rows[0] > -hy and rows[-1] < hy
+    # The higher a point in the bin, the higher its label: leader lines keep their order.
+    assert list(np.argsort(anchors_B[:, 1])) == list(np.argsort(p_B[:, 1]))
 
 
 def test_outcome_colours_are_distinct() -> None:

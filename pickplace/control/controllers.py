@@ -10,6 +10,8 @@ and returns the joint velocities q̇ [rad/s] that realise it, with a status:
 - ``qp``   (default): mink's FrameTask + PostureTask + ConfigurationLimit + VelocityLimit solved
   with daqp (differential IK as a QP with velocity limits, as in Drake's DiffIK). Never exceeds
   the joint speed limits.
+  With mink's CollisionAvoidanceLimit between the robot's geoms and the world's
+  (:mod:`pickplace.control.collision`); ``qp-no-collision`` is the same without it.
 - ``pinv``: q̇ = J⁺ V_cmd with an SVD pseudo-inverse whose singular values below a cutoff are
   treated as zero (the lecture's pseudo-inverse controller). Not clipped: near a singularity it
   asks for huge speeds.
@@ -21,6 +23,8 @@ controllers").
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import enum
 import math
 from abc import ABC, abstractmethod
@@ -34,6 +38,7 @@ import mujoco
 import numpy as np
 from mink.lie import SE3
 
+from pickplace.control.collision import Clearance, GripperBodies, RobotWorldCollision
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import ControllerError, UnknownNameError, require_positive
 from pickplace.geometry import pose_error_W_floats
@@ -178,6 +183,27 @@ class DiffIKController(ABC):
         """
         del q, q_dot
 
+    def observe_world(self, mocap_pos: np.ndarray, mocap_quat: np.ndarray) -> None:
+        """Take the world's moving bodies' poses (every mocap body: an obstacle a fault moves)
+        into the IK's own data, so that the next commands see them.
+
+        Args:
+            mocap_pos: The simulation's ``data.mocap_pos`` (nmocap, 3) [m].
+            mocap_quat: Its ``data.mocap_quat`` (nmocap, 4), wxyz.
+        """
+        data = self.kinematics.data
+        data.mocap_pos[:] = mocap_pos
+        data.mocap_quat[:] = mocap_quat
+
+    def set_gripper_width(self, width: float) -> None:
+        """The fingers' gap for the next commands [m]; only a controller that keeps the robot
+        clear of the world (``qp`` with its collision limit) uses it.
+
+        Args:
+            width: The gap the fingers are at [m].
+        """
+        return  # pinv and dls see no geometry
+
     @abstractmethod
     def _solve(
         self, q: np.ndarray, J: np.ndarray, V_cmd: np.ndarray, x_WG: np.ndarray
@@ -251,6 +277,28 @@ class QPWeights:
         damping: Levenberg-Marquardt damping added to the Hessian diagonal.
         limit_gain: ConfigurationLimit gain (fraction of the distance to a limit per tick).
         limit_margin: Distance kept from the joint limits [rad].
+        collision_limit: Keep the robot's geoms clear of the world's with mink's
+            CollisionAvoidanceLimit (:mod:`pickplace.control.collision`).
+        collision_min_distance: Distance the collision limit keeps between a robot geom and a
+            fixed world geom (floor, bins) [m]: 2 mm, below the pre-flight's 5 mm clearance,
+            so a plan the pre-flight passed (fingers 8 mm over a bin floor at the pick) is
+            never held back by it.
+        collision_detection_distance: Fixed-world pairs closer than this get a constraint
+            row [m]: 30 mm, more than d_min plus a tick's approach at the fastest robot
+            surface of the bundled robots' nominal runs (1.5 m/s, 15 mm a tick at 100 Hz),
+            so a pair is seen before it is within d_min.
+        moving_min_distance: Distance kept from the world's moving bodies (mocap bodies: an
+            obstacle a fault puts in the path during the run) [m]: 20 mm. The plan never came
+            near them, so nothing the plan needs is held back, and the physical arm, which
+            lags a command stopped within a few ticks by 5–15 mm (docs/physics-notes.md,
+            "The collision limit"), stays clear of it.
+        moving_detection_distance: Moving-body pairs closer than this get a row [m]: 50 mm,
+            d_min plus a tick's approach at 1.5 m/s and as much again.
+        collision_gain: Fraction of the distance in excess of d_min that a tick may close
+            [-], in (0, 1] (mink's default value, here per tick): the excess shrinks to 15 %
+            a tick. 0.5 braked the planner's path sweep (20 mm a tick) on its descent to the
+            pick, whose fingers stop about 10 mm above the bin floor, and changed the
+            nominal plan's timing; 0.85 leaves every nominal path unbraked.
     """
 
     position_cost: float = 1.0
@@ -260,6 +308,27 @@ class QPWeights:
     damping: float = 1e-12
     limit_gain: float = 0.95
     limit_margin: float = 0.005
+    collision_limit: bool = True
+    collision_min_distance: float = 0.002
+    collision_detection_distance: float = 0.03
+    moving_min_distance: float = 0.02
+    moving_detection_distance: float = 0.05
+    collision_gain: float = 0.85
+
+    def __post_init__(self) -> None:
+        """Validate the collision limit's settings."""
+        self.fixed_clearance()
+        self.moving_clearance()
+        if not 0.0 < self.collision_gain <= 1.0:
+            raise ControllerError(f"collision limit gain {self.collision_gain}; valid: (0, 1]")
+
+    def fixed_clearance(self) -> Clearance:
+        """The collision limit's distances from the fixed world."""
+        return Clearance(self.collision_min_distance, self.collision_detection_distance)
+
+    def moving_clearance(self) -> Clearance:
+        """The collision limit's distances from the world's moving bodies."""
+        return Clearance(self.moving_min_distance, self.moving_detection_distance)
 
 
 class QPController(DiffIKController):
@@ -300,11 +369,15 @@ class QPController(DiffIKController):
         backend: str = "fast",
         **kwargs: object,
     ) -> None:
+        w = weights or QPWeights()
+        if w.collision_limit and kwargs.get("kinematics") is None:
+            # Its own copy of the arm-only model: the fingers are moved in it to their gap.
+            kwargs["kinematics"] = ArmKinematics(scene, model=copy.deepcopy(scene.arm_model))
         super().__init__(scene, dt, **kwargs)  # type: ignore[arg-type]
         if backend not in self.BACKENDS:
             raise UnknownNameError("qp backend", backend, self.BACKENDS)
         self.backend = backend
-        self.weights = w = weights or QPWeights()
+        self.weights = w
         model = self.kinematics.model
         self.configuration = self.kinematics.configuration
         self.frame_task = mink.FrameTask(
@@ -324,6 +397,28 @@ class QPController(DiffIKController):
             model, dict(zip(scene.robot.arm_joint_names, self.v_max.tolist(), strict=True))
         )
         self.limits: list[mink.Limit] = [self.configuration_limit, self.velocity_limit]
+        self.collision: RobotWorldCollision | None = None
+        self._gripper: GripperBodies | None = None
+        if w.collision_limit:
+            if model is scene.arm_model:
+                raise ControllerError(
+                    "the qp collision limit moves the fingers in the IK's model: give it "
+                    "kinematics on a copy of the scene's arm_model"
+                )
+            self.collision = RobotWorldCollision(
+                scene,
+                model,
+                dt,
+                fixed=w.fixed_clearance(),
+                moving=w.moving_clearance(),
+                gain=w.collision_gain,
+            )
+            self._gripper = GripperBodies(scene, model)
+            self._gripper.set_width(scene.robot.home_width)
+            self.limits += self.collision.limits
+        # The collision rows of the last solve (G Δq ≤ h), for the status.
+        self._G_collision = np.zeros((0, model.nv))
+        self._h_collision = np.zeros(0)
         # The frame task's target: one SE3 whose parameter vector is rewritten every tick.
         self._X_WG_next = SE3(wxyz_xyz=np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
         self._x_WG_next = self._X_WG_next.wxyz_xyz
@@ -420,8 +515,23 @@ class QPController(DiffIKController):
         self._x_WG_next[:] = (qw, qx, qy, qz, px + vx * dt, py + vy * dt, pz + vz * dt)
         self.frame_task.transform_target_to_world = self._X_WG_next
 
+    def observe_world(self, mocap_pos: np.ndarray, mocap_quat: np.ndarray) -> None:
+        """As :meth:`DiffIKController.observe_world`; the collision limit's broad phase then
+        recomputes the world geoms' bounds at the next tick."""
+        super().observe_world(mocap_pos, mocap_quat)
+        if self.collision is not None:
+            self.collision.world_moved()
+
+    def set_gripper_width(self, width: float) -> None:
+        """The fingers' gap for the next commands [m]: with the collision limit, the IK's
+        model places its gripper bodies there (cheap when it has not changed)."""
+        if self._gripper is not None:
+            self._gripper.set_width(width)
+
     def _solve_mink(self, q: np.ndarray) -> np.ndarray | None:
         self._bounds_into(q)
+        if self.collision is not None:  # the same rows, for the status only
+            self._G_collision, self._h_collision = self.collision.rows(self.configuration.data)
         try:
             return mink.solve_ik(
                 self.configuration,
@@ -545,7 +655,26 @@ class QPController(DiffIKController):
         if mu:
             self._H_diag += mu
         self._bounds_into(q)
-        x, _, exitflag, _ = daqp.solve(H, c, self._A_empty, self._upper, self._lower, self._sense)
+        if self.collision is None:
+            x, _, exitflag, _ = daqp.solve(
+                H, c, self._A_empty, self._upper, self._lower, self._sense
+            )
+        else:
+            # The collision limit's rows as general inequalities G Δq ≤ h (daqp's A, with
+            # bounds after the nv simple ones: upper h, lower −∞).
+            G, h = self._G_collision, self._h_collision = self.collision.rows(
+                self.configuration.data
+            )
+            k = len(h)
+            if k == 0:
+                x, _, exitflag, _ = daqp.solve(
+                    H, c, self._A_empty, self._upper, self._lower, self._sense
+                )
+            else:
+                upper = np.concatenate((self._upper, h))
+                lower = np.concatenate((self._lower, np.full(k, -np.inf)))
+                sense = np.zeros(len(upper), dtype=np.int32)
+                x, _, exitflag, _ = daqp.solve(H, c, G, upper, lower, sense)
         if exitflag < 1:
             return None
         qdot: np.ndarray = x
@@ -576,12 +705,42 @@ class QPController(DiffIKController):
                 dq = lo
             if hi - dq <= 1e-9 or dq - lo <= 1e-9:
                 status = IKStatus.LIMITED
+        h = self._h_collision
+        # A collision row met (to 1e-9 m) also limited the step.
+        met = len(h) and np.any(self._G_collision.dot(qdot) * dt >= h - 1e-9)
+        if met and status is IKStatus.OK:
+            status = IKStatus.LIMITED
         return qdot, status
 
 
+class QPNoCollisionController(QPController):
+    """The ``qp`` controller with its collision limit off (:attr:`QPWeights.collision_limit`
+    False): the same tasks, joint limits and speed limits, nothing kept from the world. A name
+    of its own, so that the planner's pre-flight runs it too and a sweep can compare it
+    (``--compare controller=qp,qp-no-collision``).
+
+    Args:
+        weights: As :class:`QPController`'s; their ``collision_limit`` is set False.
+    """
+
+    name = "qp-no-collision"
+
+    def __init__(
+        self, scene: Scene, dt: float, weights: QPWeights | None = None, **kwargs: object
+    ) -> None:
+        off = dataclasses.replace(weights or QPWeights(), collision_limit=False)
+        super().__init__(scene, dt, weights=off, **kwargs)  # type: ignore[arg-type]
+
+
 CONTROLLERS: dict[str, type[DiffIKController]] = {
-    c.name: c for c in (QPController, PinvController, DLSController)
+    c.name: c for c in (QPController, QPNoCollisionController, PinvController, DLSController)
 }
+
+
+def without_collision_limit(name: str) -> str:
+    """The name of controller ``name`` without a collision limit: ``qp`` → ``qp-no-collision``;
+    any other name is returned as it is (unknown names are left to :func:`make_controller`)."""
+    return QPNoCollisionController.name if name == QPController.name else name
 
 
 def make_controller(name: str, scene: Scene, dt: float, **kwargs: object) -> DiffIKController:

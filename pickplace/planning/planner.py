@@ -25,6 +25,11 @@ smaller wrist travel (the nearest yaw, as every plan chose before candidates exi
 none is, the report says so, with each pre-flighted candidate's first problem; if none passed
 1 and 2, with the best-ranked candidate's cheap-test problem.
 
+A plan starts at the home posture unless given a :class:`Start` (the configuration and tool
+pose where the arm stopped, when a run tries again: :mod:`pickplace.sim.recovery`); its
+candidates then start at that pose, the wrist's margin is predicted from that configuration
+and the pre-flight runs from it.
+
 Every candidate's clearance via-point turns with the base swing (``via="swing"``, see
 :func:`pickplace.planning.plan.plan_pick_place`).
 
@@ -56,7 +61,7 @@ from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import PlanError
-from pickplace.geometry import pose_error_W_floats
+from pickplace.geometry import pose_error_W_floats, require_pose
 from pickplace.planning.candidates import (
     GRAVITY,
     GraspCandidate,
@@ -82,7 +87,13 @@ from pickplace.planning.plan import (
     swung_pose,
     time_keyframes,
 )
-from pickplace.planning.preflight import Preflight, PreflightConfig, PreflightResult, Problem
+from pickplace.planning.preflight import (
+    Preflight,
+    PreflightConfig,
+    PreflightResult,
+    Problem,
+    start_configuration,
+)
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 from pickplace.planning.trajectory import JointSegment, PoseTrajectory
 from pickplace.signals import stop_point
@@ -305,6 +316,34 @@ class PlanningReport:
 
 
 @dataclass(frozen=True)
+class Start:
+    """Where a plan starts when not at the home posture (a replan at run time).
+
+    Attributes:
+        q: The arm's commanded configuration [rad], one angle per arm joint: the pre-flight's
+            IK starts from it.
+        X_WG: The tool pose there, in world: the plan's first keyframe (the pose the plan being
+            replaced holds, so that the planned pose does not jump).
+    """
+
+    q: np.ndarray
+    X_WG: SE3
+
+    def __post_init__(self) -> None:
+        """Check the pose (a unit quaternion, finite) and that ``q`` is finite angles, copied;
+        the planner checks that there is one per arm joint.
+
+        Raises:
+            PlanError: Either is invalid.
+        """
+        require_pose("start X_WG", self.X_WG)
+        q = np.array(self.q, dtype=np.float64).reshape(-1)
+        if not np.all(np.isfinite(q)):
+            raise PlanError(f"a start configuration must be finite [rad], got {q.tolist()!r}")
+        object.__setattr__(self, "q", q)
+
+
+@dataclass(frozen=True)
 class Ranked:
     """A grasp candidate and its cheap tests (see the module docstring).
 
@@ -457,7 +496,13 @@ class PickPlacePlanner:
         grasp = max(float(np.linalg.norm(p)) for p in self._p_OG)
         return float(max(hand.max(), grasp + brick))
 
-    def plan(self, X_WO_pick: SE3, X_WO_place: SE3, first_feasible: bool = True) -> PlanningReport:
+    def plan(
+        self,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        first_feasible: bool = True,
+        start: Start | None = None,
+    ) -> PlanningReport:
         """Rank the candidates, pre-flight the best few in order; stop at the first feasible
         one (unless told not to).
 
@@ -466,17 +511,23 @@ class PickPlacePlanner:
             X_WO_place: Goal pose of the brick, in world.
             first_feasible: Stop at the first feasible candidate (else pre-flight all of the
                 best :data:`MAX_PREFLIGHTS`).
+            start: Where the plans start (configuration and tool pose); None: at home.
+
+        Raises:
+            PlanError: ``start.q`` is not one finite angle per arm joint.
         """
         t0 = time.perf_counter()
         self._cspace_time, self._attempts = 0.0, 0
-        ranked = self.rank(X_WO_pick, X_WO_place)
+        if start is not None:
+            start = Start(start_configuration(self.scene, start.q), start.X_WG)
+        ranked = self.rank(X_WO_pick, X_WO_place, start)
         tried: list[Candidate] = []
         chosen: int | None = None
         for r in ranked[:MAX_PREFLIGHTS]:
             if r.problem is not None:
                 break
             stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
-            plan, result, warning, attempt = self.planned(X_WO_pick, X_WO_place, r.grasp)
+            plan, result, warning, attempt = self.planned(X_WO_pick, X_WO_place, r.grasp, start)
             tried.append(Candidate(r.grasp.label, plan, result, warning, attempt))
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
@@ -484,7 +535,7 @@ class PickPlacePlanner:
                     break
         if not tried:  # none passed the cheap tests: the best one, with its problem
             best = ranked[0]
-            plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp)
+            plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp, start=start)
             tried.append(Candidate(best.grasp.label, plan, self._refused(plan, best)))
         total = time.perf_counter() - t0
         times = {"cartesian": total - self._cspace_time, "c-space": self._cspace_time}
@@ -511,8 +562,11 @@ class PickPlacePlanner:
             np.zeros((0, nq)),
         )
 
-    def rank(self, X_WO_pick: SE3, X_WO_place: SE3) -> list[Ranked]:
+    def rank(self, X_WO_pick: SE3, X_WO_place: SE3, start: Start | None = None) -> list[Ranked]:
         """Every grasp candidate with its cheap tests, best first (see the module docstring).
+
+        The wrist's margin is predicted from ``start`` (its last joint's angle and tool yaw),
+        by default from home.
 
         Vectorised over the candidates: the pick poses ``X_WG = X_WO X_OG``, the place poses
         (of ``X_WO_goal X_OG`` and ``X_WO_goal Rz(π) X_OG``, the one whose yaw is nearer the
@@ -562,7 +616,11 @@ class PickPlacePlanner:
         # the yaw of the home tool swung to face the pick), then over the transfer (the pick's
         # yaw to the place's, less the swing between them: the via-point turns with the
         # swing). Without a vertical last axis, or without limits, the margin is inf.
-        home_yaw = self._home_yaw + _wrap(np.arctan2(*from_pick.T[::-1]) - self._home_azimuth)
+        yaw0, azimuth0, q0 = self._home_yaw, self._home_azimuth, robot.q_home
+        if start is not None:
+            p0 = start.X_WG.translation() - base
+            yaw0, azimuth0, q0 = yaw_of(start.X_WG.rotation()), math.atan2(p0[1], p0[0]), start.q
+        home_yaw = yaw0 + _wrap(np.arctan2(*from_pick.T[::-1]) - azimuth0)
         to_pick = _wrap(yaw_pick - home_yaw)
         p_to = p_place[:, :2] - base[:2]
         swing = _wrap(np.arctan2(*p_to.T[::-1]) - np.arctan2(*from_pick.T[::-1]))
@@ -571,7 +629,7 @@ class PickPlacePlanner:
         margin = np.full(n, np.inf)
         j = robot.n_joints - 1
         if abs(self.wrist_axis_z) >= 0.5 and not robot.continuous[j]:
-            q_pick = robot.q_home[j] + to_pick / self.wrist_axis_z
+            q_pick = q0[j] + to_pick / self.wrist_axis_z
             q_place = q_pick + transfer / self.wrist_axis_z
             qs = np.stack([q_pick, q_place])
             margin = np.minimum(qs - robot.q_min[j], robot.q_max[j] - qs).min(axis=0)
@@ -627,53 +685,56 @@ class PickPlacePlanner:
         )
 
     def timed_plan(
-        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate
+        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate, start: Start | None = None
     ) -> tuple[Plan, PreflightResult, str | None]:
         """One candidate: the path swept by the pre-flight, then (if it passes) timed by the
-        robot's limits and pre-flighted again as timed.
+        robot's limits and pre-flighted again as timed; from ``start`` (default: home).
 
         Returns:
             The timed plan, its pre-flight and the timing's warning (None if the slip budget
             held); or, when the path sweep fails, the swept plan, the sweep's result (its first
             problem is on the path, whatever the timing) and None.
         """
-        path = self.make_plan(X_WO_pick, X_WO_place, grasp, self.sweep_config)
-        swept = self.preflight.run(path, X_WO_pick, X_WO_place)
+        path = self.make_plan(X_WO_pick, X_WO_place, grasp, self.sweep_config, start)
+        q_start = None if start is None else start.q
+        swept = self.preflight.run(path, X_WO_pick, X_WO_place, q_start=q_start)
         if not swept.feasible:
             return path, swept, None
         timed, warning = self.retimed(path, swept.times, swept.q)
-        result = self.preflight.run(timed, X_WO_pick, X_WO_place)
+        result = self.preflight.run(timed, X_WO_pick, X_WO_place, q_start=q_start)
         return timed, result, warning
 
     def planned(
-        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate
+        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate, start: Start | None = None
     ) -> tuple[Plan, PreflightResult, str | None, CSpaceAttempt | None]:
-        """One candidate as :meth:`timed_plan` plans it, and, when its path sweep collides in
-        the transfer, with the transfer planned in C-space instead (:meth:`cspace_plan`).
+        """One candidate as :meth:`timed_plan` plans it (from ``start``, default home), and,
+        when its path sweep collides in the transfer, with the transfer planned in C-space
+        instead (:meth:`cspace_plan`).
 
         Returns:
             The plan, its pre-flight, the timing's warning and the C-space attempt (None when
             the Cartesian plan was kept). When the C-space planning finds no path, the
             Cartesian sweep with its collision, the C-space problem added to its text.
         """
-        path = self.make_plan(X_WO_pick, X_WO_place, grasp, self.sweep_config)
-        swept = self.preflight.run(path, X_WO_pick, X_WO_place)
-        if swept.feasible:
-            timed, warning = self.retimed(path, swept.times, swept.q)
-            return timed, self.preflight.run(timed, X_WO_pick, X_WO_place), warning, None
-        problem = swept.problem
-        phases = path.phases
+        plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, grasp, start)
+        problem, phases = result.problem, plan.phases
         if (
             problem is None
             or problem.kind != "collision"
             or phases is None
             or not phases.transport[0] < problem.t <= phases.transport[1]
+            or any(law is not None for law in plan.trajectory.laws)  # the timed plan's
         ):
-            return path, swept, None, None
-        return self.cspace_plan(X_WO_pick, X_WO_place, path, swept)
+            return plan, result, warning, None
+        return self.cspace_plan(X_WO_pick, X_WO_place, plan, result, start)
 
     def cspace_plan(
-        self, X_WO_pick: SE3, X_WO_place: SE3, path: Plan, swept: PreflightResult
+        self,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        path: Plan,
+        swept: PreflightResult,
+        start: Start | None = None,
     ) -> tuple[Plan, PreflightResult, str | None, CSpaceAttempt]:
         """The swept Cartesian ``path`` with its transfer (lift → pre-place) planned in
         C-space, swept, timed and pre-flighted again (see the module docstring).
@@ -683,7 +744,9 @@ class PickPlacePlanner:
             X_WO_place: Goal pose of the brick.
             path: The candidate's swept Cartesian plan, whose transfer collides.
             swept: Its path sweep's pre-flight, with that collision.
+            start: Where the plan starts (default: home).
         """
+        q_start = None if start is None else start.q
         t0 = time.perf_counter()
         problem = swept.problem
         assert problem is not None
@@ -698,7 +761,9 @@ class PickPlacePlanner:
         )
         # The IK's joint positions along the whole Cartesian path (through the collision: the
         # IK does not see it), at the lift and the pre-place, refined to their poses.
-        full = self.preflight.run(path, X_WO_pick, X_WO_place, stop_at_problem=False)
+        full = self.preflight.run(
+            path, X_WO_pick, X_WO_place, stop_at_problem=False, q_start=q_start
+        )
         q_lift = self._exact(full.q[round(times[i_lift] / dt)], keyframes[i_lift].X_WG)
         q_pre = self._exact(full.q[round(times[i_pre] / dt)], keyframes[i_pre].X_WG)
         X_GO = path.X_OG.inverse()
@@ -733,11 +798,12 @@ class PickPlacePlanner:
             return path, replace(swept, problem=replace(problem, text=text)), None, attempt
         motion = JointMotion(result.path, ArmKinematics(sc))
         swept_plan = self._with_joint_transfer(path, i_lift, i_pre, motion)
-        swept = self.preflight.run(swept_plan, X_WO_pick, X_WO_place)
+        swept = self.preflight.run(swept_plan, X_WO_pick, X_WO_place, q_start=q_start)
         if not swept.feasible:
             return swept_plan, swept, None, attempt
         timed, warning = self.retimed(swept_plan, swept.times, swept.q)
-        return timed, self.preflight.run(timed, X_WO_pick, X_WO_place), warning, attempt
+        final = self.preflight.run(timed, X_WO_pick, X_WO_place, q_start=q_start)
+        return timed, final, warning, attempt
 
     def _exact(self, q: np.ndarray, X_WG: SE3, iterations: int = 20) -> np.ndarray:
         """``q`` moved (least-norm Gauss-Newton steps) until the tool is at ``X_WG`` [rad]."""
@@ -833,19 +899,20 @@ class PickPlacePlanner:
         X_WO_place: SE3,
         grasp: GraspCandidate | None = None,
         config: PlanConfig | None = None,
+        start: Start | None = None,
     ) -> Plan:
         """The pick-and-place plan with ``grasp`` (default: the best-ranked one), the gripper
         opened to the grasp's open width, timed by Cartesian limits (``config``, default the
-        planner's)."""
+        planner's), from ``start``'s tool pose (default: home's)."""
         if grasp is None:
-            grasp = self.rank(X_WO_pick, X_WO_place)[0].grasp
+            grasp = self.rank(X_WO_pick, X_WO_place, start)[0].grasp
         config = replace(
             config or self.config,
             open_width=grasp.open_width,
             release_width=self.config.open_width,  # the whole opening its open time spans
         )
         return plan_pick_place(
-            self.X_WG_home,
+            self.X_WG_home if start is None else start.X_WG,
             X_WO_pick,
             X_WO_place,
             self.clearance_z,

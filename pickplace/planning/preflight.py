@@ -33,7 +33,13 @@ import mujoco
 import numpy as np
 from mink.lie import SE3
 
-from pickplace.control.controllers import DiffIKController, IKResult, IKStatus, make_controller
+from pickplace.control.controllers import (
+    DiffIKController,
+    IKResult,
+    IKStatus,
+    make_controller,
+    without_collision_limit,
+)
 from pickplace.errors import PlanError, require_positive
 from pickplace.planning.plan import Plan, grasp_width
 from pickplace.planning.trajectory import PoseTrajectory
@@ -179,7 +185,8 @@ class Preflight:
 
     Args:
         scene: The scene (its model is copied, never changed).
-        controller: Name of the run's controller (``qp``, ``pinv`` or ``dls``).
+        controller: Name of the run's controller (``qp``, ``qp-no-collision``, ``pinv`` or
+            ``dls``); ``qp`` runs without its collision limit, as ``qp-no-collision``.
         config: Rate and thresholds.
     """
 
@@ -189,7 +196,13 @@ class Preflight:
         self.scene = scene
         self.config = config or PreflightConfig()
         self.dt = 1.0 / self.config.rate_hz
-        self.controller = make_controller(controller, scene, self.dt)
+        # The run's controller without its collision limit: at the pre-flight's rate a tick
+        # moves the tool up to 50 mm (20 mm in the path sweep), beyond the limit's detection
+        # distance and its linearisation, and it brakes the tool beside walls that the path
+        # clears by more than the clearance (the planner then refused feasible candidates);
+        # a plan kept this far from the world never meets the limit's 2 mm at the control
+        # rate (docs/planning.md, "The collision limit").
+        self.controller = make_controller(without_collision_limit(controller), scene, self.dt)
         self.model = collision_model(scene, self.config.detection_distance)
         self.data = mujoco.MjData(self.model)
         self._names = scene.robot.arm_joint_names
@@ -202,9 +215,14 @@ class Preflight:
         self._fine: DiffIKController | None = None  # made for the first C-space motion
 
     def run(
-        self, plan: Plan, X_WO_start: SE3, X_WO_goal: SE3 | None, stop_at_problem: bool = True
+        self,
+        plan: Plan,
+        X_WO_start: SE3,
+        X_WO_goal: SE3 | None,
+        stop_at_problem: bool = True,
+        q_start: np.ndarray | None = None,
     ) -> PreflightResult:
-        """Pre-flight ``plan`` from the home posture.
+        """Pre-flight ``plan`` from the home posture, or from ``q_start``.
 
         The IK and collision checks run tick by tick (a problem there can end the run early);
         the joint, speed and σmin checks run on the whole joint path afterwards, vectorised;
@@ -215,8 +233,15 @@ class Preflight:
             X_WO_start: Brick pose before it is grasped.
             X_WO_goal: Brick pose after it is released (None: it stays at the start).
             stop_at_problem: Stop at the first problem (else check the whole plan).
+            q_start: Commanded arm configuration the plan starts from [rad] (a replan at run
+                time starts where the arm stopped); None: the robot's home posture. The plan's
+                first keyframe should be its tool pose.
+
+        Raises:
+            PlanError: ``q_start`` is not one finite angle per arm joint.
         """
         cfg, sc, dt = self.config, self.scene, self.dt
+        q0 = start_configuration(sc, q_start)
         traj, phases = plan.trajectory, plan.phases
         X_GO = plan.X_OG.inverse() if plan.X_OG is not None else None
         width_held = grasp_width(plan, sc)
@@ -235,7 +260,7 @@ class Preflight:
         clear_path = np.full(n, cfg.detection_distance)
         tracking_sq = cfg.tracking_tolerance**2
         midpoint = cfg.midpoint_feedforward
-        q = sc.robot.q_home.copy()
+        q = q0
         found: Problem | None = None  # the first IK or collision problem
         end = n
         half_dt = 0.5 * dt
@@ -492,6 +517,25 @@ class Preflight:
             sc.geom_name(b),
             (float(pos[0]), float(pos[1]), float(pos[2])),
         )
+
+
+def start_configuration(scene: Scene, q_start: np.ndarray | None) -> np.ndarray:
+    """A copy of ``q_start`` [rad], checked to be one finite angle per arm joint, or of the
+    robot's home posture when None.
+
+    Raises:
+        PlanError: Wrong length or a non-finite value; the message gives the joint count.
+    """
+    if q_start is None:
+        return scene.robot.q_home.copy()
+    q = np.array(q_start, dtype=np.float64).reshape(-1)
+    n = scene.robot.n_joints
+    if q.shape != (n,) or not np.all(np.isfinite(q)):
+        raise PlanError(
+            f"a start configuration must be {n} finite joint angles [rad] (one per arm joint of "
+            f"{scene.robot.name}), got {np.asarray(q_start).tolist()!r}"
+        )
+    return q
 
 
 def check_plan_duration(duration: float) -> None:

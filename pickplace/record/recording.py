@@ -33,6 +33,10 @@ Entity path                                        Contents
                                                    show one label, "pick / settle / ...")
 ``world/plan/target_bin``                          static: target bin's free inner volume
                                                    (green box outline)
+``world/plan/replans/<n>/path``                    from the moment the n-th plan replaced the
+                                                   one executed (a ``replan`` event): its tool
+                                                   path, orange for the stop after a failed
+                                                   attempt, green for the next attempt's plan
 ``world/tool/planned``                             per tick: planned tool pose, 12 cm axes
 ``world/tool/commanded``                           per tick: FK of the commanded q, 9 cm axes
 ``world/tool/actual``                              per tick: simulated tool pose, 6 cm axes
@@ -123,19 +127,23 @@ def run_verdict(result: RunResult, dt: float) -> RunVerdict:
         result: The finished run.
         dt: Control period [s].
     """
+    s = result.summary()
+    replans = "".join(
+        f" Replanned at t={r['t']:.2f} s after {r['after']}: attempt {r['attempt']}."
+        for r in s["replans"]
+    )
     if result.success:
-        s = result.summary()
         place = s.get("place_error_m")
         text = (
             (f"Brick placed {place * 1000:.1f} mm from its target; " if place is not None else "")
             + f"max tool position error {s['max_position_error_m'] * 1000:.1f} mm, max joint "
             f"speed / limit {s['max_joint_speed_ratio']:.3f}, min singular value "
-            f"{s['min_singular_value']:.3f}."
+            f"{s['min_singular_value']:.3f}." + replans
         )
         return RunVerdict(True, None, text, result.ticks, result.sim_time_s, dt)
     text = result.failure_text or str(result.failure)
     reason = str(result.failure)
-    text = text.removeprefix(f"{reason}: ")
+    text = text.removeprefix(f"{reason}: ") + (f" ({replans.strip()})" if replans else "")
     tick = result.failure_tick if result.failure_tick is not None else result.ticks
     t = result.failure_time_s if result.failure_time_s is not None else result.sim_time_s
     return RunVerdict(False, reason, text, tick, t, dt)
@@ -225,6 +233,7 @@ class Recorder:
         self._verdict_logged = False
         self._early_events: list[Event] = []
         self._moving: list[tuple[int, str]] = []  # (body id, entity path)
+        self._replans = 0  # plans that replaced another (world/plan/replans/<n>)
         self._ik_status_names = ", ".join(f"{i} {s}" for i, s in enumerate(IK_STATUSES))
 
     # ------------------------------------------------------------------ lifecycle
@@ -411,6 +420,8 @@ class Recorder:
         self._log_event(event.tick, event.t, event.level, event.text)
         if event.kind is EventKind.VERDICT:
             self._verdict_logged = True
+        elif event.kind is EventKind.REPLAN:
+            self._log_replan(run, event)
 
     def on_finish(self, run: Simulation, result: RunResult) -> None:
         """Send the rest of the log, the summary and the verdict, close the stream and put the
@@ -559,6 +570,24 @@ class Recorder:
             static=True,
         )
         self._log_rejected(run)
+
+    def _log_replan(self, run: Simulation, event: Event) -> None:
+        """The plan that has just replaced the one executed: its tool path, from the event's
+        time on (a plan carrying nothing, the stop after a failed attempt, in orange)."""
+        self._replans += 1
+        plan = run.plan
+        colour = [1.0, 0.55, 0.1] if plan.phases is None else [0.2, 0.85, 0.35]
+        self.rec.set_time("sim_time", duration=to_duration(np.array([event.t]))[0])
+        self.rec.set_time("tick", sequence=int(event.tick))
+        self.rec.log(
+            f"world/plan/replans/{self._replans}/path",
+            rr.LineStrips3D(
+                [plan.trajectory.sample_path(200)],
+                colors=[colour],
+                radii=[0.003],
+                labels=[f"plan {self._replans + 1} from t={event.t:.2f} s"],
+            ),
+        )
 
     def _log_rejected(self, run: Simulation) -> None:
         """Each candidate plan the planner rejected: its path, thin and grey, and a red marker

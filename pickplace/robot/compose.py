@@ -383,6 +383,7 @@ def load_robot(
     composed = _compose(world, desc, brick_geom, pad_slots)
     spec, calib = composed.spec, composed.calibration
     spec.add_key(name=HOME_KEY)  # filled in once the home is known (Robot.write_home)
+    arm_spec = spec.copy()  # before compiling: see Composition.arm_spec
     model = _compile(spec, src)
     obj = mujoco.mjtObj
     arm_names = tuple(ARM_PREFIX + j for j in composed.arm.joints)
@@ -433,6 +434,7 @@ def load_robot(
     composition = Composition(
         spec=spec,
         model=model,
+        arm_spec=arm_spec,
         robot=Robot(
             name=desc.name,
             description=desc,

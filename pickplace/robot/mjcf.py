@@ -111,18 +111,25 @@ class Part:
         return RobotError(f"{self.path}: {self.field}: {problem}")
 
 
+def mjcf_file_problem(path: Path, valid: str) -> str | None:
+    """None if ``path`` is a regular file of at most :data:`MAX_MJCF_BYTES`; else what is wrong
+    and what would be valid, for a message (``valid`` names the kind of file wanted, e.g. "an
+    MJCF world file")."""
+    problem = file_problem(path)
+    if problem is not None:
+        return f"{problem}; valid: {valid}"
+    size = path.stat().st_size
+    if size > MAX_MJCF_BYTES:
+        return f"is {size} bytes; valid: {valid} of at most {MAX_MJCF_BYTES} bytes"
+    return None
+
+
 def _read_xml(path: Path, source: Path, field: str, reading: _Reading) -> ET.Element:
     """Parse ``path`` (size, element count and root checked); its elements count in
     ``reading``."""
-    problem = file_problem(path)
+    problem = mjcf_file_problem(path, "an MJCF file")
     if problem is not None:
-        raise RobotError(f"{source}: {field}: '{path}' {problem}; valid: an MJCF file")
-    size = path.stat().st_size
-    if size > MAX_MJCF_BYTES:
-        raise RobotError(
-            f"{source}: {field}: '{path}' is {size} bytes; valid: an MJCF file of at most "
-            f"{MAX_MJCF_BYTES} bytes"
-        )
+        raise RobotError(f"{source}: {field}: '{path}' {problem}")
     root: ET.Element | None = None
     try:
         for _, element in ET.iterparse(path, events=("start",)):
@@ -478,15 +485,9 @@ def parse_world(path: Path) -> mujoco.MjSpec:
     import mujoco
 
     path = path.resolve()  # MuJoCo misresolves nested <model file=...> for relative paths.
-    problem = file_problem(path)
+    problem = mjcf_file_problem(path, "an MJCF world file")
     if problem is not None:
-        raise SceneError(f"scene file '{path}' {problem}; valid: an MJCF world file")
-    size = path.stat().st_size
-    if size > MAX_MJCF_BYTES:
-        raise SceneError(
-            f"scene file '{path}' is {size} bytes; valid: an MJCF world file of at most "
-            f"{MAX_MJCF_BYTES} bytes"
-        )
+        raise SceneError(f"scene file '{path}' {problem}")
     try:
         with _parse_warnings() as warned:
             spec = mujoco.MjSpec.from_file(str(path))

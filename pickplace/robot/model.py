@@ -209,11 +209,22 @@ class Robot:
 
 @dataclass(frozen=True)
 class Composition:
-    """A composed scene: its spec (for derived models), the compiled model, the robot."""
+    """A composed scene: its spec (for derived models), the compiled model, the robot.
+
+    Attributes:
+        spec: The composed spec (compiled into ``model``).
+        model: The compiled scene.
+        robot: The robot resolved in it.
+        arm_spec: A copy of ``spec`` taken before it was compiled, which :attr:`arm_model`
+            strips: removing an element from the copy of a compiled spec costs 10–30 ms with
+            a published robot's meshes (measured, Menagerie iiwa14 + 2F-85), from a copy of an
+            uncompiled one about 1 ms.
+    """
 
     spec: mujoco.MjSpec
     model: mujoco.MjModel
     robot: Robot
+    arm_spec: mujoco.MjSpec
 
     @cached_property
     def arm_model(self) -> mujoco.MjModel:
@@ -223,7 +234,7 @@ class Composition:
         (actuators, tendons, equalities, sensors, keyframes) are removed; bodies, sites and
         geometry are unchanged, so the tool site's forward kinematics equal the simulation's.
         """
-        spec = self.spec.copy()
+        spec = self.arm_spec  # stripped once: the property is cached
         for collection in ("actuators", "tendons", "equalities", "sensors", "keys", "pairs"):
             for element in list(getattr(spec, collection)):
                 spec.delete(element)

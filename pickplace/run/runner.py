@@ -34,6 +34,7 @@ from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
 from pickplace.sim.events import EventKind
 from pickplace.sim.loader import load_scene
 from pickplace.sim.loop import SimConfig, Simulation, TickObserver
+from pickplace.sim.recovery import check_attempts
 from pickplace.sim.scenarios import BuildRequest, Scenario, get_scenario
 from pickplace.sim.task import Task
 from pickplace.sim.variation import apply_to_task, apply_world
@@ -79,6 +80,10 @@ class RunRequest:
             applied by :mod:`pickplace.sim.variation`; a drawn ``speed`` or ``control_rate``
             takes the place of :attr:`speed` or :attr:`control_rate_hz` (which must then be
             left at their defaults). Recorded as the summary's ``parameters``.
+        attempts: Most attempts the run may take (1 to
+            :data:`~pickplace.sim.recovery.MAX_ATTEMPTS`): after a missed grasp or a drop it
+            stops the arm, waits for the brick to rest and plans again from there
+            (:mod:`pickplace.sim.recovery`); 1 (the default): the first failure ends the run.
     """
 
     scenario: str = "pick-place"
@@ -94,6 +99,7 @@ class RunRequest:
     pace: float | None = None
     speed: float = 1.0
     parameters: ParameterDraw | None = None
+    attempts: int = 1
     observers: Sequence[TickObserver] = field(default=(), compare=False)
 
     def recording_id(self, robot_name: str) -> str:
@@ -106,6 +112,12 @@ class RunRequest:
         """The speed override the run uses: the drawn ``speed``, else :attr:`speed`."""
         drawn = self.parameters.get("speed") if self.parameters is not None else None
         return self.speed if drawn is None else drawn
+
+    @property
+    def run_attempts(self) -> int:
+        """The most attempts the run takes: the drawn ``attempts``, else :attr:`attempts`."""
+        drawn = self.parameters.get("attempts") if self.parameters is not None else None
+        return self.attempts if drawn is None else int(drawn)
 
     @property
     def run_control_rate_hz(self) -> float:
@@ -302,6 +314,7 @@ def validate_request(req: RunRequest) -> Scenario:
             f"seed must be an integer in [0, {MAX_SEED}], got {req.seed!r}", field="seed"
         )
     check_speed(req.speed)
+    check_attempts(req.attempts)
     lo, hi = CONTROL_RATE_RANGE_HZ
     if not (
         isinstance(req.control_rate_hz, int | float)
@@ -352,6 +365,10 @@ def _validate_parameters(req: RunRequest, draw: ParameterDraw) -> None:
     if "speed" in draw.values and req.speed != 1.0:
         raise InvalidInputError(
             "the speed is given and also varied; give one of them", field="speed"
+        )
+    if "attempts" in draw.values and req.attempts != 1:
+        raise InvalidInputError(
+            "the attempts are given and also varied; give one of them", field="attempts"
         )
     if "control_rate" in draw.values and req.control_rate_hz != 100.0:
         raise InvalidInputError(
@@ -445,6 +462,7 @@ def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, T
             req.brick,
             controller=req.controller,
             timing=TimingConfig(speed=req.run_speed),
+            attempts=req.run_attempts,
         )
     )
     if req.parameters is not None:  # after planning: what the plan must not know

@@ -120,6 +120,9 @@ class CheckContext:
         criteria: Thresholds of the verdict.
         dt: Control period [s].
         emit: Records an event (``emit(kind, text, level, tick)``).
+        t_start: Run time at which the plan's clock reads 0 [s]: 0 for the run's first plan,
+            later for a plan that replaced another (the log's times are run times; a plan's
+            phases are on its own clock).
     """
 
     scene: Scene
@@ -127,6 +130,7 @@ class CheckContext:
     criteria: SuccessCriteria
     dt: float
     emit: Emit
+    t_start: float = 0.0
 
 
 def first_tick(mask: np.ndarray, k0: int) -> int | None:
@@ -321,16 +325,15 @@ class GraspMonitor(Check):
     ``drop_slip`` in the gripper frame or loses all pad contact for ``drop_contact_loss``.
     While holding it fills the log's ``slip`` (up to the place) and ``holding_torque``.
 
-    Raises:
-        ValueError: The plan has no phases (it carries nothing to monitor).
+    The phases are on the plan's clock, which starts at ``ctx.t_start`` of the run. A plan
+    without phases carries nothing (e.g. the stop between two attempts of a run, see
+    :mod:`pickplace.sim.recovery`): the monitor then starts released and judges nothing.
     """
 
     def __init__(self, ctx: CheckContext) -> None:
-        if ctx.plan.phases is None:
-            raise ValueError("the grasp monitor needs a plan with phases (grasp, place, release)")
         self.ctx = ctx
         self.phases = ctx.plan.phases
-        self.state = GraspState.OPEN
+        self.state = GraspState.OPEN if self.phases is not None else GraspState.RELEASED
         self.p_GO_grasp: np.ndarray | None = None
         self.contact_lost_since: float | None = None
         self.brick_width = grasp_width(ctx.plan, ctx.scene)
@@ -338,14 +341,16 @@ class GraspMonitor(Check):
 
     def first_failure(self, log: TickLog, k0: int, k1: int) -> Failure | None:
         holding = np.zeros(k1 - k0, dtype=bool)
-        failure = self._run(log, k0, k1, holding)
+        failure = self._run(log, k0, k1, holding) if self.phases is not None else None
         log.set_holding(k0, k1, holding, self.ctx.scene.brick_mass)
         return failure
 
     def _run(self, log: TickLog, k0: int, k1: int, holding: np.ndarray) -> Failure | None:
         cr, emit = self.ctx.criteria, self.ctx.emit
-        t_grasp, t_place = self.phases.grip_closed, self.phases.place_reached
-        t_release = self.phases.release
+        assert self.phases is not None
+        t0 = self.ctx.t_start  # the phases in run time, as the log's times
+        t_grasp, t_place = t0 + self.phases.grip_closed, t0 + self.phases.place_reached
+        t_release = t0 + self.phases.release
         sl = slice(k0, k1)
         # Brick centre in the tool frame, p_GO = R_WGᵀ (p_WO − p_WG), for every tick.
         p_WO = log.body_pos[sl, self.ctx.scene.brick_body_id]

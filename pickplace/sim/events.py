@@ -29,6 +29,9 @@ class EventKind(str, enum.Enum):
     """The run's verdict (or that it was interrupted)."""
     PLAN = "plan"
     """What the plan could not honour (a warning at tick 0), or the chosen plan."""
+    REPLAN = "replan"
+    """The plan being executed was replaced: the stop after a failed attempt, or the next
+    attempt's plan (:mod:`pickplace.sim.recovery`)."""
     SENSOR = "sensor"
     """A contact sensor saw more contacts than it reports."""
     MUJOCO_WARNING = "mujoco-warning"

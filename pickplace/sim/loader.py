@@ -17,7 +17,10 @@
 The result is cached per process by the content of every file involved (the world file, the
 description, the arm and gripper files with their includes and assets) and the arguments;
 every call returns a scene with its own copy of the model, since faults change it (a mass, a
-gain), while the arm-only model of the IK is shared.
+gain), while the arm-only model of the IK is shared. The home chosen in step 2 (a few tenths
+of a second of planning) is also kept on disk (:mod:`pickplace.cache`), under the same key plus
+the candidates and the source of the code that plans (:data:`HOME_CODE_PACKAGES`), so a second
+process — every sweep worker — reads it instead of planning again.
 """
 
 from __future__ import annotations
@@ -28,7 +31,9 @@ import hashlib
 from pathlib import Path
 
 import mujoco
+import numpy as np
 
+from pickplace.cache import read_json, source_digest, write_json
 from pickplace.errors import UnknownNameError
 from pickplace.planning.home import choose_home
 from pickplace.planning.plan import DEFAULT_PLAN_CONFIG, for_gripper
@@ -49,6 +54,11 @@ from pickplace.world.scene import (
 )
 
 _SCENES: dict[str, Scene] = {}
+
+HOME_CODE_PACKAGES = ("control", "planning", "robot", "world")
+"""Packages whose code decides which home candidate plans best: their source keys the home
+kept on disk."""
+_PACKAGE = Path(__file__).resolve().parent.parent
 
 
 def clear_scene_cache() -> None:
@@ -87,13 +97,18 @@ def load_scene(
         key.update(part.encode())
     template = _SCENES.get(key.hexdigest())
     if template is None:
-        template = _compose(file.spec, file.path, desc, names, pad_slots)
+        template = _compose(file.spec, file.path, desc, names, pad_slots, key.hexdigest())
         _SCENES[key.hexdigest()] = template
     return dataclasses.replace(template, model=copy.deepcopy(template.model))
 
 
 def _compose(
-    spec: mujoco.MjSpec, path: Path, desc: RobotDescription, names: WorldNames, pad_slots: int
+    spec: mujoco.MjSpec,
+    path: Path,
+    desc: RobotDescription,
+    names: WorldNames,
+    pad_slots: int,
+    key: str,
 ) -> Scene:
     if spec.geom(names.brick_geom) is None:  # the gripper is calibrated on the brick's size
         raise UnknownNameError("geom", names.brick_geom, [g.name for g in spec.geoms if g.name])
@@ -103,8 +118,33 @@ def _compose(
     robot = scene.robot
     q_home = robot.q_home
     if len(robot.home_candidates) > 1:
-        q_home = choose_home(scene, robot.home_candidates)
+        q_home = _chosen_home(scene, key)
     width = for_gripper(DEFAULT_PLAN_CONFIG, robot.calibration).open_width
     robot = dataclasses.replace(robot, q_home=q_home.copy(), home_width=width)
     robot.write_home(scene.model, q_home, width)
     return dataclasses.replace(scene, robot=robot)
+
+
+def _chosen_home(scene: Scene, scene_key: str) -> np.ndarray:
+    """:func:`~pickplace.planning.home.choose_home` over the robot's candidates, read from the
+    disk cache when it holds the choice for this scene, candidates and code (else chosen and
+    kept). A cached posture is used only if it is one of the candidates, bit for bit."""
+    candidates = scene.robot.home_candidates
+    modules = [
+        f"{package}/{f.name}"
+        for package in HOME_CODE_PACKAGES
+        for f in sorted((_PACKAGE / package).glob("*.py"))
+    ]
+    digest = hashlib.sha256(scene_key.encode())
+    digest.update(source_digest(modules).encode())
+    for q in candidates:
+        digest.update(np.asarray(q, dtype=np.float64).tobytes())
+    name = f"home-{digest.hexdigest()}.json"
+    cached = read_json(name)
+    if isinstance(cached, list):
+        for q in candidates:
+            if np.array_equal(np.asarray(q, dtype=np.float64), np.asarray(cached, dtype=float)):
+                return q
+    q_home = choose_home(scene, candidates)
+    write_json(name, np.asarray(q_home, dtype=np.float64).tolist())
+    return q_home

@@ -4,7 +4,9 @@ Each control tick (``SimConfig.control_rate_hz``, default 100 Hz):
 
 1. read the planned tool pose X_WG(t), its spatial velocity V_WG(t) and the gripper width;
 2. the controller turns them into joint velocities at the commanded configuration q_cmd;
-3. q_cmd is integrated from those velocities and sent to the arm's position actuators;
+3. q_cmd is integrated from those velocities and sent to the arm's position actuators (the
+   controller sees the world's mocap poses and the fingers' commanded gap: its collision
+   limit keeps the robot clear of the world);
 4. MuJoCo steps the physics for one control period at the scene's timestep;
 5. the commands, the IK's Jacobian and MuJoCo's state are copied into the tick log
    (:class:`~pickplace.sim.ticklog.TickLog`).
@@ -22,6 +24,12 @@ explicit fault injected by a scenario (:mod:`pickplace.sim.faults`).
 The loop knows nothing of grasps or bins: the task's goal (:mod:`pickplace.sim.goals`) supplies the
 checks that judge each block (:mod:`pickplace.sim.checks`) and the verdict on the end state, from
 geometry stated in :class:`~pickplace.sim.checks.SuccessCriteria`.
+
+Nor does it know when to try again: a task with a recovery (:class:`~pickplace.sim.task.Recovery`,
+e.g. :mod:`pickplace.sim.recovery`) is asked about the failures of each block before they count,
+and after each block; it may replace the plan being executed (:meth:`Simulation.replace_plan`),
+which is all the loop itself can do about it: from the next tick on it samples the new plan at
+``t - t_start``, with a new set of the goal's checks.
 """
 
 from __future__ import annotations
@@ -30,7 +38,7 @@ import copy
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import mujoco
@@ -38,9 +46,9 @@ import numpy as np
 
 from pickplace.control.controllers import IK_STATUSES, DiffIKController, IKStatus
 from pickplace.errors import ControllerError, InvalidInputError, require_positive
-from pickplace.planning.plan import Plan
+from pickplace.planning.plan import Plan, grasp_width
 from pickplace.planning.planner import PlanningReport
-from pickplace.sim.checks import Check, CheckContext, FailureReason, SuccessCriteria
+from pickplace.sim.checks import Check, CheckContext, Failure, FailureReason, SuccessCriteria
 from pickplace.sim.events import Event, EventKind
 from pickplace.sim.task import Task
 from pickplace.sim.ticklog import CONTROLLER_NONFINITE, FINITE, STATE_NONFINITE, TickLog
@@ -203,12 +211,22 @@ class Simulation:
         self._views = _DataViews(self.data)
         autoreset_off = self.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_AUTORESET
         self._check_qacc = bool(autoreset_off)
+        self._plan = task.plan
+        self.plan_start = 0.0  # run time at which the plan's clock reads 0 [s]
+        self._plan_replaced = False  # in the block being assessed
         self._sample = task.plan.trajectory.sample
         self._command = controller.command
         self._following = False  # the controller follows a C-space motion's joint path
+        self._set_width = controller.set_gripper_width
+        # The IK sees the fingers at the commanded gap, never narrower than the grasped brick
+        # (closed on it they stop there), as the pre-flight does.
+        self._width_held = grasp_width(task.plan, scene)
+        # The world's moving bodies as the IK last saw them (see _world_moved).
+        self._seen_mocap_pos = self.data.mocap_pos.copy()
+        self._seen_mocap_quat = self.data.mocap_quat.copy()
+        self._has_mocap = self.model.nmocap > 0
 
-        horizon = task.trajectory.end_time + self.criteria.settle_time + self.criteria.failure_grace
-        self.max_ticks = int(np.ceil(horizon / self.dt)) + 2
+        self.max_ticks = self._horizon_ticks(task.plan, 0.0)
         _check_log_size(scene, self.max_ticks, self.dt)
         self.log = TickLog(scene, self.max_ticks, self.dt)
         self.ticks = 0
@@ -228,8 +246,55 @@ class Simulation:
 
     @property
     def plan(self) -> Plan:
-        """The plan being executed."""
-        return self.task.plan
+        """The plan being executed (the task's, until a recovery replaced it)."""
+        return self._plan
+
+    def _horizon_ticks(self, plan: Plan, t_start: float) -> int:
+        """The most ticks the run can take with ``plan`` started at run time ``t_start`` [s]:
+        to its end, the settling and the grace after a failure."""
+        cr = self.criteria
+        horizon = t_start + plan.trajectory.end_time + cr.settle_time + cr.failure_grace
+        return int(np.ceil(horizon / self.dt)) + 2
+
+    def replace_plan(self, plan: Plan, t_start: float, text: str) -> None:
+        """Execute ``plan`` from the next tick to be commanded on, sampled at run time minus
+        ``t_start``; the goal's checks start anew on it (a new set, whose context has the plan
+        and ``t_start``), its keyframes get their events, the log grows to its horizon, and a
+        ``replan`` event at the next tick says ``text``.
+
+        A recovery calls this between blocks (:class:`~pickplace.sim.task.Recovery`). For the
+        commanded motion to continue without a step, the new plan should start where the old
+        one is at ``t_start`` — e.g. ``t_start`` the last commanded tick's time and the plan's
+        first pose and velocity that tick's planned ones.
+
+        Args:
+            plan: The plan to execute.
+            t_start: Run time at which the plan's clock reads 0 [s]: at most the next tick's
+                time, k·dt.
+            text: What the event says (why the plan was replaced).
+
+        Raises:
+            InvalidInputError: ``t_start`` is not finite or lies after the next tick, or the
+                run's tick log would pass :data:`MAX_LOG_BYTES` (nothing is replaced then).
+        """
+        now = self.ticks * self.dt
+        if not (math.isfinite(t_start) and t_start <= now + 1e-9):
+            raise InvalidInputError(
+                f"a plan may start at most at the next tick's time {now:.4f} s, got {t_start!r}"
+            )
+        max_ticks = self._horizon_ticks(plan, t_start)
+        _check_log_size(self.scene, max_ticks, self.dt)
+        self.log.grow(max_ticks)
+        self.max_ticks = max_ticks
+        self._plan = plan
+        self.plan_start = float(t_start)
+        self._sample = plan.trajectory.sample
+        self._keyframe_times = [(t_start + k.t, k.name) for k in plan.trajectory.keyframes]
+        self._next_keyframe = 0
+        self.context = replace(self.context, plan=plan, t_start=self.plan_start)
+        self.checks = self.task.goal.checks(self.context)
+        self._plan_replaced = True
+        self.emit(EventKind.REPLAN, f"plan replaced at t={now:.2f} s: {text}", level="warn")
 
     def pad_forces(self) -> np.ndarray:
         """Normal force [N] of the brick on the left and right pads (from the pad sensors)."""
@@ -280,7 +345,7 @@ class Simulation:
             if planning is not None:
                 self._planning_events(planning)
             if planning is None or planning.feasible:
-                self.advance(self.max_ticks)
+                self.advance()
         except KeyboardInterrupt:
             interrupted = True
             # Complete the rows already simulated (idempotent), without judging them.
@@ -334,35 +399,42 @@ class Simulation:
             tick=0,
         )
 
-    def advance(self, ticks: int) -> None:
-        """Simulate up to ``ticks`` more control ticks, fewer if the run ends, and assess them.
+    def advance(self, ticks: int | None = None) -> None:
+        """Simulate up to ``ticks`` more control ticks (None: to the end of the run), fewer if
+        the run ends, and assess them.
 
         Works block by block: the commands of a block's ticks (:meth:`_command_ticks`), then
         its physics tick by tick (:meth:`_physics_tick`), then :meth:`assess`. The IK never
-        reads the simulated state (it integrates q_cmd open loop, like Drake's
-        DifferentialInverseKinematicsIntegrator, and faults act on the world only), so this
-        order gives exactly the run that interleaving IK and physics tick by tick gives,
-        while each phase keeps its own code and data in the CPU's caches.
+        reads the robot's simulated state (it integrates q_cmd open loop, like Drake's
+        DifferentialInverseKinematicsIntegrator, and faults act on the world only); of the
+        world it sees the mocap poses, handed over at a block's start, and a tick whose
+        faults move one ends its block. So this order gives exactly the run that
+        interleaving IK and physics tick by tick gives, while each phase keeps its own code
+        and data in the CPU's caches.
 
         Raises:
             InvalidInputError: ``ticks`` is negative.
         """
-        if ticks < 0:
+        if ticks is not None and ticks < 0:
             raise InvalidInputError(f"ticks must be >= 0, got {ticks}")
-        limit = min(self.max_ticks, self.ticks + ticks)
-        end = self.task.trajectory.end_time
+        target = None if ticks is None else self.ticks + ticks
         settle_ticks = round(self.criteria.settle_time / self.dt)
-        end_tick = int(np.ceil(end / self.dt - 1e-9))
         goal, scene, data, criteria = self.task.goal, self.scene, self.data, self.criteria
-        nonfinite = self.log.nonfinite
         # MuJoCo's warnings become events instead of lines in ./MUJOCO_LOG.TXT.
         previous_handler = mujoco.get_mju_user_warning()
         mujoco.set_mju_user_warning(self._on_mujoco_warning)
         try:
             stopped = False
-            while self.ticks < limit and not stopped:
+            while not stopped:
+                # The plan (and with it the run's end) may have been replaced after a block.
+                limit = self.max_ticks if target is None else min(self.max_ticks, target)
+                if self.ticks >= limit:
+                    break
+                end = self.plan_start + self._plan.trajectory.end_time
+                end_tick = int(np.ceil(end / self.dt - 1e-9))
+                nonfinite = self.log.nonfinite  # the log may have grown with a new plan
                 k0 = self.ticks
-                k1 = self._command_ticks(k0, min(k0 + self.block_ticks, limit))
+                k1 = self._command_ticks(k0, self._block_end(k0, limit))
                 for k in range(k0, k1):
                     failed_and_shown = self._stop_tick is not None and k >= self._stop_tick
                     settled = k > end_tick and (
@@ -376,12 +448,32 @@ class Simulation:
                     if nonfinite[k] != FINITE:
                         stopped = True
                         break
+                    if self._has_mocap and self._world_moved():
+                        break  # the next ticks' commands must see the moved world
                 # Commands past the last simulated tick are dropped.
                 if self.ticks > k0:
                     self.q_cmd = self.log.q_cmd[self.ticks - 1].copy()
                 self.assess()
+                if self._plan_replaced and self.failure is None:
+                    stopped = False  # a new plan goes on from here
+                self._plan_replaced = False
         finally:
             mujoco.set_mju_user_warning(previous_handler)
+
+    def _block_end(self, k0: int, limit: int) -> int:
+        """End of the block starting at ``k0``: :attr:`block_ticks` later, at most ``limit``,
+        and ended early at the tick whose end reaches the next decision time of the task's
+        recovery (:meth:`~pickplace.sim.task.Recovery.next_decision_time`), so that it can act
+        right after that tick. Blocks of any length give the same run."""
+        end = min(k0 + self.block_ticks, limit)
+        recovery = self.task.recovery
+        if recovery is not None and self.failure is None:
+            t = recovery.next_decision_time(self)
+            if t is not None:
+                k = math.ceil(t / self.dt - 1e-9)  # tick k - 1 ends at k·dt >= t
+                if k0 < k < end:
+                    end = k
+        return end
 
     def _command_ticks(self, k0: int, k1: int) -> int:
         """Plan sample and IK for ticks ``[k0, k1)``, from ``q_cmd`` at ``k0``.
@@ -391,6 +483,10 @@ class Simulation:
         motion and is the last one simulated). The gripper's commands for the planned widths
         are computed for the whole block at once.
         """
+        v = self._views
+        self._seen_mocap_pos[:] = v.mocap_pos
+        self._seen_mocap_quat[:] = v.mocap_quat
+        self.controller.observe_world(v.mocap_pos, v.mocap_quat)
         end = self._arm_commands(k0, k1)
         log = self.log
         log.gripper_ctrl[k0:end] = self._ctrl_for_widths(log.gripper_cmd[k0:end])
@@ -400,15 +496,17 @@ class Simulation:
         """The per-tick part of :meth:`_command_ticks`: plan samples and IK."""
         log, dt, ff = self.log, self.dt, self._ff
         sample, command = self._sample, self._command
-        segment_index = self.task.trajectory.segment_index
+        segment_index = self._plan.trajectory.segment_index
+        t_start = self.plan_start
         dynamics = self._dynamics if self._use_dynamics else None
+        set_width, width_held = self._set_width, self._width_held
         q_cmd = self.q_cmd
         qdot_prev = log.qdot_cmd[k0 - 1] if k0 > 0 else self._zero_qdot
-        trajectory = self.task.trajectory
+        trajectory = self._plan.trajectory
         # A C-space motion's joint path steers the controller's null space (posture).
         joints = trajectory.joint_sample if trajectory.has_joint_segments else None
         for k in range(k0, k1):
-            t = k * dt
+            t = k * dt - t_start  # the plan's clock
             x_plan, V_plan, width = sample(t)
             if joints is not None:
                 js = joints(t)
@@ -416,6 +514,7 @@ class Simulation:
                     self.controller.follow_joints(*(js if js is not None else (None, None)))
                 self._following = js is not None
             t0 = time.perf_counter_ns()
+            set_width(width if width > width_held else width_held)
             res = command(q_cmd, x_plan, V_plan)
             log.ik_us[k] = (time.perf_counter_ns() - t0) * 1e-3
             qdot = res.qdot
@@ -470,6 +569,21 @@ class Simulation:
         log.body_quat[k] = v.xquat
         log.sensordata[k] = v.sensordata
 
+    def _world_moved(self) -> bool:
+        """True if a mocap body (an obstacle a fault moves) is not where the IK last saw it.
+
+        The block's commands were computed before its physics, so they saw the world as it
+        was at the block's start; a tick that moves it ends the block, and the next block's
+        commands see the world after that tick, as tick-by-tick IK and physics would
+        (a mocap body moves only by a fault, and the moved world is handed to the controller
+        by :meth:`_command_ticks`).
+        """
+        v = self._views
+        return bool(
+            (v.mocap_pos != self._seen_mocap_pos).any()
+            or (v.mocap_quat != self._seen_mocap_quat).any()
+        )
+
     def _on_mujoco_warning(self, message: str) -> None:
         self.emit(EventKind.MUJOCO_WARNING, f"MuJoCo: {message}", level="warn")
 
@@ -480,22 +594,32 @@ class Simulation:
 
         Keyframe events first, then the goal's checks on the block; the earliest failure wins,
         and of failures at one tick the check listed first (the goal's order is the
-        precedence); only the first failure of the run counts. Observers then receive the
-        completed rows.
+        precedence); only the first failure of the run counts. A task's recovery is asked
+        first whether it takes the block's failures up (the run then goes on, on a plan it
+        puts in place), and after the block whether the run must end. Observers then receive
+        the completed rows.
         """
         k0, k1 = self.assessed, self.ticks
         if k1 <= k0:
             return
         self._derive(k0, k1)
         self._keyframe_events(k0, k1)
-        first = None
+        found: list[Failure] = []
         for check in self.checks:
-            found = check.first_failure(self.log, k0, k1)
-            if found is not None and (first is None or found.tick < first.tick):
-                first = found
-        if first is not None:
-            self.fail(first.reason, first.text, tick=first.tick)
+            failure = check.first_failure(self.log, k0, k1)
+            if failure is not None:
+                found.append(failure)
+        found.sort(key=lambda f: f.tick)  # stable: of one tick, the check listed first
+        recovery = self.task.recovery
+        if found and (
+            recovery is None or self.failure is not None or not recovery.take_up(self, found)
+        ):
+            self.fail(found[0].reason, found[0].text, tick=found[0].tick)
         self.assessed = k1
+        if recovery is not None and self.failure is None:
+            final = recovery.after_block(self)
+            if final is not None:
+                self.fail(final.reason, final.text, tick=final.tick)
         for obs in self.observers:
             obs.on_ticks(self, k0, k1)
 
@@ -526,9 +650,11 @@ class Simulation:
             k = k0 + i
             self._next_keyframe += 1
             err = self.log.position_error[k]
+            t0 = self.plan_start
+            of_plan = "" if t0 == 0.0 else f" of the plan started at t={t0:.2f} s"
             self.emit(
                 EventKind.KEYFRAME,
-                f"keyframe '{name}' reached (planned t={kt:.2f} s, "
+                f"keyframe '{name}' reached (planned t={kt - self.plan_start:.2f} s{of_plan}, "
                 f"tool {err * 1000:.1f} mm from plan)",
                 tick=k,
             )
@@ -555,7 +681,8 @@ class Simulation:
         else:
             X_WO = brick_pose(self.scene, self.data)
         X_WO_goal = goal.X_WO_goal
-        end = self.task.trajectory.end_time
+        end = self.plan_start + self._plan.trajectory.end_time
+        recovery = self.task.recovery
         return RunResult(
             scenario=self.task.scenario,
             controller=self.controller.name,
@@ -583,6 +710,7 @@ class Simulation:
             planning=self.task.planning,
             robot=self.scene.robot.name,
             parameters=self.task.parameters,
+            attempts=None if recovery is None else recovery.attempts(),
         )
 
 
@@ -636,6 +764,8 @@ class _DataViews:
         self.site_xpos = data.site_xpos
         self.site_xmat = data.site_xmat
         self.sensordata = data.sensordata
+        self.mocap_pos = data.mocap_pos
+        self.mocap_quat = data.mocap_quat
 
 
 def _as_slice(ids: np.ndarray) -> slice | np.ndarray:

@@ -27,7 +27,7 @@ class Parameter:
         high: Largest valid value.
         meaning: What the value is, in one line.
         grid_only: Whether only a grid of values is allowed (a discrete parameter).
-        integer: Whether every value must be a whole number (a count).
+        whole: Whether its values must be whole numbers (a count).
     """
 
     name: str
@@ -36,7 +36,7 @@ class Parameter:
     high: float
     meaning: str
     grid_only: bool = False
-    integer: bool = False
+    whole: bool = False
 
     def __post_init__(self) -> None:
         """Check that the bounds are finite and ordered."""
@@ -48,9 +48,8 @@ class Parameter:
 
     def describe(self) -> str:
         """``name [unit] in [low, high]``, as listed in error messages."""
-        grid = ", grid only" if self.grid_only else ""
-        whole = ", whole numbers" if self.integer else ""
-        return f"{self.name} [{self.unit}] in [{self.low:g}, {self.high:g}]{grid}{whole}"
+        grid = (", grid only" if self.grid_only else "") + (", whole" if self.whole else "")
+        return f"{self.name} [{self.unit}] in [{self.low:g}, {self.high:g}]{grid}"
 
 
 PARAMETERS: dict[str, Parameter] = {
@@ -108,7 +107,16 @@ PARAMETERS: dict[str, Parameter] = {
             6.0,
             "number of boxes standing at random in the workspace, drawn from the seed",
             grid_only=True,
-            integer=True,
+            whole=True,
+        ),
+        Parameter(
+            "attempts",
+            "-",
+            1.0,
+            10.0,
+            "most attempts of a run: after a missed grasp or a drop it plans again (whole numbers)",
+            grid_only=True,
+            whole=True,
         ),
     )
 }

@@ -16,9 +16,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 
 import numpy as np
-from mink.lie import SE3
+from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
+from pickplace.control.reach import ReachIK, farthest_reachable
 from pickplace.errors import PlanError, UnknownNameError
 from pickplace.planning.grasp import top_down_rotation, yaw_of
 from pickplace.planning.plan import Plan, PlanConfig, Waypoint, for_gripper, time_keyframes
@@ -28,6 +29,7 @@ from pickplace.planning.trajectory import PoseTrajectory
 from pickplace.sim import faults
 from pickplace.sim.catalog import CATALOG, ScenarioInfo
 from pickplace.sim.goals import PlaceGoal, ReachGoal
+from pickplace.sim.recovery import Reattempt
 from pickplace.sim.task import Fault, Task
 from pickplace.world.cell import ObstacleCell
 from pickplace.world.obstacles import draw_boxes
@@ -60,6 +62,9 @@ class BuildRequest:
         brick: Brick start pose override, or None.
         controller: The run's controller (the planner's pre-flight runs it).
         timing: How the planner times plans by the robot (``--speed`` is its ``speed``).
+        attempts: Most attempts a pick-and-place run may take (``--attempts``): after a
+            missed grasp or a drop it plans again from where the brick rests
+            (:mod:`pickplace.sim.recovery`); 1: the first failure ends the run.
     """
 
     scene: Scene
@@ -68,6 +73,7 @@ class BuildRequest:
     brick: BrickPlacement | None = None
     controller: str = "qp"
     timing: TimingConfig = field(default_factory=TimingConfig)
+    attempts: int = 1
 
     def planner(self) -> PickPlacePlanner:
         """A planner for this request's scene, controller and timing."""
@@ -86,7 +92,9 @@ def pick_place_task(
 
     With ``preflight`` the planner's candidates are pre-flighted and the first feasible one is
     the task's plan (the task records them all; none feasible: the run ends before any
-    physics). Without it, the first candidate is executed unchecked.
+    physics). Without it, the first candidate is executed unchecked. The task's recovery
+    (:class:`~pickplace.sim.recovery.Reattempt`) plans again with the same planner, up to
+    ``req.attempts`` attempts.
     """
     scene = req.scene
     X_WO_pick = brick_on_floor(scene, placement, scene.source_bin.floor_top_z)
@@ -95,6 +103,7 @@ def pick_place_task(
     )
     planner = planner or req.planner()
     report = planner.plan(X_WO_pick, X_WO_place) if preflight else None
+    chosen = None if report is None or report.chosen is None else report.candidates[report.chosen]
     return Task(
         scenario=req.scenario,
         seed=req.seed,
@@ -103,120 +112,87 @@ def pick_place_task(
         X_WO_start=X_WO_pick,
         faults=tuple(fault_list),
         planning=report,
+        recovery=Reattempt(
+            planner, X_WO_place, req.attempts, None if chosen is None else chosen.label
+        ),
     )
 
 
-@dataclass(frozen=True)
-class ArmReach:
-    """Where the arm is fully stretched with the tool pointing down, from its kinematic chain.
-
-    Attributes:
-        shoulder: Index of the shoulder joint: the first arm joint whose axis, with every joint
-            at 0, is perpendicular to the base joint's axis.
-        elbow: The next joint whose axis is parallel to the shoulder's (then).
-        wrist: The next one after the elbow.
-        stretch: Longest distance between the shoulder's and the wrist's axes, across them:
-            the elbow straight (upper arm plus forearm, measured at q = 0 between the joint
-            anchors, without their components along the axes) [m].
-    """
-
-    shoulder: int
-    elbow: int
-    wrist: int
-    stretch: float
+# Reach scenario: the line's near end, this far from the base axis along +y [m].
+LINE_START = 0.45
+# Reach scenario: the line's height, the tool pointing down [m].
+LINE_HEIGHT = 0.30
 
 
-_AXIS_TOLERANCE = 1e-6  # |cos| of axes counted perpendicular (below) or parallel (above 1 - it)
-
-
-def arm_reach(scene: Scene) -> ArmReach:
-    """The arm's shoulder, elbow and wrist joints and its stretch (see :class:`ArmReach`).
-
-    Raises:
-        PlanError: The arm has no three such joints (it cannot be stretched by a pitch chain).
-    """
+def _reach_rotation(scene: Scene) -> SO3:
+    """The tool's orientation along the reach line: pointing down, its yaw relative to the base
+    as at home, so the last joint does not wind up while the base swings from the home
+    direction to the line's direction (+y)."""
     kin = ArmKinematics(scene)
-    kin.update(np.zeros(scene.robot.n_joints))
-    axes, anchors = kin.data.xaxis, kin.data.xanchor  # the arm model's joints are the arm's
-    base = axes[0]
-    pitch = [j for j in range(1, scene.robot.n_joints) if abs(axes[j] @ base) < _AXIS_TOLERANCE]
-    chain = [j for j in pitch if abs(axes[j] @ axes[pitch[0]]) > 1.0 - _AXIS_TOLERANCE]
-    if len(chain) < 3:
-        raise PlanError(
-            f"the arm has {len(chain)} parallel joints across its base axis ("
-            f"{', '.join(scene.robot.arm_joint_names[j] for j in chain) or 'none'}); valid for "
-            f"singular-reach: an arm with shoulder, elbow and wrist joints"
-        )
-    s, e, w = chain[:3]
-    a = axes[s]
+    kin.update(scene.robot.q_home)
+    X_home = kin.X_WG()
+    p_home = X_home.translation() - scene.robot.p_W_base
+    swing = math.pi / 2 - math.atan2(p_home[1], p_home[0])
+    return top_down_rotation(yaw_of(X_home.rotation()) + swing)
 
-    def across(v: np.ndarray) -> float:
-        return float(np.linalg.norm(v - (v @ a) * a))
 
-    return ArmReach(s, e, w, across(anchors[e] - anchors[s]) + across(anchors[w] - anchors[e]))
+def reach_line(scene: Scene, z_tool: float = LINE_HEIGHT) -> Callable[[float], SE3]:
+    """The reach line's tool pose at distance r [m] from the base axis along +y."""
+    R = _reach_rotation(scene)
+    base = scene.robot.p_W_base
+
+    def at(r: float) -> SE3:
+        return SE3.from_rotation_and_translation(R, np.array([base[0], base[1] + r, z_tool]))
+
+    return at
 
 
 def full_stretch_distance(scene: Scene, z_tool: float) -> float:
-    """Horizontal distance from the base axis of the tool, pointing down at height ``z_tool``
-    [m], with the arm fully stretched in the vertical plane of its pitch joints [m].
+    """Farthest distance from the base axis along +y at which the tool, pointing down at
+    height ``z_tool`` [m] with its yaw as along the reach line, is reachable within the joint
+    limits [m] (to 0.1 mm).
 
-    The arm's plane and the tool's offsets from the wrist are taken at the home posture (the
-    tool pointing down): the wrist sits at the tool's height plus its offset above it, at the
-    stretch from the shoulder; the tool's offset along the pitch axes (e.g. a UR's wrist) moves
-    it sideways out of the plane.
+    Found by IK (:func:`pickplace.control.reach.farthest_reachable`) between the line's near
+    end and a bound no arm exceeds: the joint anchors' distances link to link plus the last
+    anchor's to the tool.
+
+    Raises:
+        PlanError: The line's near end (``LINE_START``) is out of reach at that height.
     """
-    reach = arm_reach(scene)
+    robot = scene.robot
     kin = ArmKinematics(scene)
-    kin.update(scene.robot.q_home)
-    d = kin.data
-    a = d.xaxis[reach.shoulder].copy()  # the pitch axis at home (horizontal)
-    p_base, p_shoulder = scene.robot.p_W_base, d.xanchor[reach.shoulder]
-    p_wrist, p_tool = d.xanchor[reach.wrist], kin.p_WG()
-    u = np.cross(a, [0.0, 0.0, 1.0])  # horizontal, across the pitch axis: the arm's radial axis
-    u /= np.linalg.norm(u)
-    if (p_tool - p_base) @ u < 0.0:
-        u = -u
-    wrist_to_tool = p_tool - p_wrist
-    z_wrist = z_tool - wrist_to_tool[2]
-    rise = z_wrist - p_shoulder[2]
-    if abs(rise) >= reach.stretch:
-        raise PlanError(
-            f"the wrist cannot reach height {z_wrist:.3f} m from the shoulder at "
-            f"{p_shoulder[2]:.3f} m (stretch {reach.stretch:.3f} m); valid: a lower tool height"
-        )
-    r_wrist = (p_shoulder - p_base) @ u + math.sqrt(reach.stretch**2 - rise**2)
-    r_tool = r_wrist + wrist_to_tool @ u
-    sideways = (p_tool - p_base) @ a
-    return math.hypot(r_tool, sideways)
+    kin.update(robot.q_home)
+    anchors = kin.data.xanchor[: robot.n_joints]
+    bound = float(
+        np.linalg.norm(np.diff(anchors, axis=0), axis=1).sum()
+        + np.linalg.norm(kin.p_WG() - anchors[-1])
+    )
+    ik = ReachIK(scene.arm_model, kin.tool_site_id, robot.q_min, robot.q_max)
+    return farthest_reachable(ik, reach_line(scene, z_tool), robot.q_home, LINE_START, bound)
 
 
 def singular_reach_task(req: BuildRequest, plan: PlanConfig | None = None) -> Task:
     """A straight radial line that pulls the tool past full stretch and back (where a
     pseudo-inverse asks for joint speeds above the limits and the QP does not).
 
-    The line runs along +y from the base axis (away from both bins) at a height of 0.30 m with
-    the tool pointing down. Its far end lies ``REACH_OVERSHOOT`` beyond the arm's reach there,
-    computed from the kinematic chain (:func:`full_stretch_distance`: the wrist can be at
-    most upper arm plus forearm from the shoulder, and the tool hangs below it as at home).
+    The line runs along +y from the base axis (away from both bins) at a height of
+    ``LINE_HEIGHT`` with the tool pointing down (:func:`reach_line`). Its far end lies
+    ``REACH_OVERSHOOT`` beyond the arm's reach there, found by IK
+    (:func:`full_stretch_distance`).
     """
     scene = req.scene
     plan = for_gripper(plan or PlanConfig(), scene.robot.calibration)
     kin = ArmKinematics(scene)
     kin.update(scene.robot.q_home)
     X_home = kin.X_WG()
-    z_tool = 0.30
-    r_far = full_stretch_distance(scene, z_tool) + REACH_OVERSHOOT
-    # Keep the tool's yaw relative to the base as at home, so the last joint does not wind up
-    # while the base swings from the home direction to the line's direction (+y).
+    line = reach_line(scene, LINE_HEIGHT)
+    r_far = full_stretch_distance(scene, LINE_HEIGHT) + REACH_OVERSHOOT
+    near, far = line(LINE_START), line(r_far)
+    # The via point: 0.35 m along x and y from the base axis, between home and the line.
     base = scene.robot.p_W_base
-    p_home = X_home.translation() - base
-    swing = math.pi / 2 - math.atan2(p_home[1], p_home[0])
-    R = top_down_rotation(yaw_of(X_home.rotation()) + swing)
-
-    def at(x: float, y: float) -> SE3:
-        return SE3.from_rotation_and_translation(R, np.array([base[0] + x, base[1] + y, z_tool]))
-
-    via, near, far = at(0.35, 0.35), at(0.0, 0.45), at(0.0, r_far)
+    via = SE3.from_rotation_and_translation(
+        near.rotation(), np.array([base[0] + 0.35, base[1] + 0.35, LINE_HEIGHT])
+    )
     w = plan.open_width
     waypoints = [
         Waypoint("initial", X_home, w),

@@ -54,22 +54,14 @@ class TickLog:
         # The robot's actuator commands, arm then gripper (one row is sent to MuJoCo per tick):
         # position targets q_cmd + (kv/kp) q̇_cmd, and the gripper command for gripper_cmd.
         self.ctrl = np.zeros((n, nq + n_grip))
-        self.arm_ctrl = self.ctrl[:, :nq]
-        self.gripper_ctrl = self.ctrl[:, nq:]
         self.qpos = np.zeros((n, model.nq))
         self.p_WG = np.zeros((n, 3))
         self.R_WG = np.zeros((n, 3, 3))
-        self.R_WG_flat = self.R_WG.reshape(n, 9)
         self.body_pos = np.zeros((n, model.nbody, 3))
         self.body_quat = np.zeros((n, model.nbody, 4))  # wxyz
         self.sensordata = np.zeros((n, model.nsensordata))
         # What became non-finite at the tick (FINITE, CONTROLLER_NONFINITE, STATE_NONFINITE).
         self.nonfinite = np.zeros(n, dtype=np.int8)
-        # Views of the poses by part.
-        self.quat_WG_plan = self.x_WG_plan[:, :4]
-        self.p_WG_plan = self.x_WG_plan[:, 4:]
-        self.quat_WG_cmd = self.x_WG_cmd[:, :4]
-        self.p_WG_cmd = self.x_WG_cmd[:, 4:]
         # ---- derived, filled per block by derive()
         self.t = np.zeros(n)  # time at the end of the tick [s]
         self.q = np.zeros((n, nq))
@@ -99,6 +91,41 @@ class TickLog:
         sides = scene.pad_sensor_side
         self._pad_sides = np.zeros((len(sides), 2))  # per pad sensor: 1 in its side's column
         self._pad_sides[np.arange(len(sides)), sides] = 1.0
+        self.capacity = n
+        self._make_views()
+
+    def _make_views(self) -> None:
+        """The views of the rows by part (made again when the log grows)."""
+        nq = self.q_cmd.shape[1]
+        self.arm_ctrl = self.ctrl[:, :nq]
+        self.gripper_ctrl = self.ctrl[:, nq:]
+        self.R_WG_flat = self.R_WG.reshape(self.capacity, 9)
+        self.quat_WG_plan = self.x_WG_plan[:, :4]
+        self.p_WG_plan = self.x_WG_plan[:, 4:]
+        self.quat_WG_cmd = self.x_WG_cmd[:, :4]
+        self.p_WG_cmd = self.x_WG_cmd[:, 4:]
+
+    def grow(self, capacity: int) -> None:
+        """Make room for ``capacity`` rows (a run whose plan was replaced by a longer one),
+        keeping every row stored; new rows are as a new log's. Does nothing when the log is
+        already that large.
+
+        Args:
+            capacity: Rows the log must hold.
+        """
+        if capacity <= self.capacity:
+            return
+        old = self.capacity
+        for name, value in list(vars(self).items()):
+            if not isinstance(value, np.ndarray) or value.base is not None or name[0] == "_":
+                continue
+            grown = np.zeros((capacity, *value.shape[1:]), dtype=value.dtype)
+            if name == "slip":
+                grown[:] = np.nan
+            grown[:old] = value
+            setattr(self, name, grown)
+        self.capacity = capacity
+        self._make_views()
 
     @staticmethod
     def bytes_per_tick(scene: Scene) -> int:

@@ -4,8 +4,9 @@ The runner calls :func:`apply_to_scene` right after loading the scene, before an
 planned, so the planner, its pre-flight, the checks and the verdict all see the varied world
 (the planner's slip budget knows the brick's mass, its friction and the grip force); and
 :func:`apply_to_task` after planning, for what the plan must not know (the pose noise).
-``speed`` and ``control_rate`` are the run request's own fields (``RunRequest.speed``,
-``RunRequest.control_rate_hz``); the runner takes them from the draw.
+``speed``, ``control_rate`` and ``attempts`` are the run request's own fields
+(``RunRequest.speed``, ``RunRequest.control_rate_hz``, ``RunRequest.attempts``); the runner
+takes them from the draw.
 
 =================  ==========================================================================
 parameter          what changes

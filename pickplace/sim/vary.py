@@ -22,6 +22,8 @@ name              unit   valid            meaning
                                           long along the same path
 ``control_rate``  Hz     [100, 1000]      IK rate; grid only (a rate must divide the physics
                                           rate, e.g. 100, 125, 250, 500 Hz at 2 ms steps)
+``attempts``      -      1 … 10           most attempts of a run (``--attempts``); grid of
+                                          whole numbers only
 ``divider_height`` m     [0, 0.6]         a divider wall between the bins this high (0: none)
 ``shelf_height``  m      [0, 1.2]         a shelf over bin 2, its underside this high (0: none)
 ``obstacle_boxes`` -     {0, 1, …, 6}     this many boxes standing at random in the workspace;
@@ -124,17 +126,18 @@ class VarySpec:
             object.__setattr__(self, "low", min(self.values))
             object.__setattr__(self, "high", max(self.values))
             ends = self.values
-            if p.integer and any(v != math.floor(v) for v in self.values):
-                raise InvalidInputError(
-                    f"--vary {p.name}: {p.name} takes whole numbers ({p.meaning}); got "
-                    f"{','.join(f'{v:g}' for v in self.values)}"
-                )
         else:
             raise InvalidInputError(f"--vary kind must be 'uniform' or 'grid', got {self.kind!r}")
         for v in ends:
             if not (math.isfinite(v) and p.low <= v <= p.high):
                 raise InvalidInputError(
                     f"--vary {p.name}: {p.name} [{p.unit}] must lie in [{p.low:g}, {p.high:g}] "
+                    f"({p.meaning}); got {v:g}"
+                )
+        for v in self.values if p.whole else ():
+            if not float(v).is_integer():
+                raise InvalidInputError(
+                    f"--vary {p.name}: {p.name} takes whole numbers in [{p.low:g}, {p.high:g}] "
                     f"({p.meaning}); got {v:g}"
                 )
 

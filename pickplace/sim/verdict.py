@@ -8,6 +8,7 @@ and the failure reasons, are in :mod:`pickplace.sim.checks`; the goals in
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Any
 
@@ -148,6 +149,74 @@ def run_metrics(log: TickLog, ticks: int, X_WO_final: SE3, X_WO_goal: SE3 | None
 # -------------------------------------------------------------------------- summary
 
 
+@dataclass(frozen=True)
+class Attempt:
+    """One attempt of a run: a plan executed from where the run stood, and how it ended.
+
+    Attributes:
+        number: 1 for the run's first plan, then 2, 3, ...
+        start_tick: Control tick at which its plan started (0 for the first).
+        start_time_s: Run time at which its plan's clock read 0 [s].
+        candidate: Label of the plan's candidate (None: a plan made without the planner).
+        failure: Why it failed, when a recovery took that failure up and the run went on
+            (None for the run's last attempt, whose outcome is the run's).
+        failure_tick: Tick of that failure.
+        failure_time_s: Run time at the end of that tick [s].
+        failure_text: Its text, as a failure event would say it (``"dropped: ..."``).
+        stop_tick: Tick from which the arm was brought to a stop after the failure.
+    """
+
+    number: int
+    start_tick: int
+    start_time_s: float
+    candidate: str | None
+    failure: FailureReason | None = None
+    failure_tick: int | None = None
+    failure_time_s: float | None = None
+    failure_text: str | None = None
+    stop_tick: int | None = None
+
+
+def attempt_rows(
+    attempts: list[Attempt], result: RunResult
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The summary's ``attempts`` and ``replans`` (see docs/cli.md): each attempt with its
+    outcome (the last one's is the run's), and each replan with the failure it followed and
+    the new plan's candidate."""
+    rows = []
+    for i, a in enumerate(attempts):
+        last = i == len(attempts) - 1
+        failure = result.failure if last else a.failure
+        tick = result.failure_tick if last else a.failure_tick
+        t = result.failure_time_s if last else a.failure_time_s
+        rows.append(
+            {
+                "attempt": a.number,
+                "start_tick": a.start_tick,
+                "start_time_s": a.start_time_s,
+                "candidate": a.candidate,
+                "success": bool(last and result.success),
+                "failure": None if failure is None else failure.value,
+                "failure_tick": tick,
+                "failure_time_s": t,
+                "failure_text": result.failure_text if last else a.failure_text,
+                "stop_tick": a.stop_tick,
+            }
+        )
+    replans = [
+        {
+            "attempt": b.number,
+            "tick": b.start_tick,
+            "t": b.start_time_s,
+            "after": None if a.failure is None else a.failure.value,
+            "failure_text": a.failure_text,
+            "candidate": b.candidate,
+        }
+        for a, b in itertools.pairwise(attempts)
+    ]
+    return rows, replans
+
+
 @dataclass
 class RunResult:
     """Outcome of one run, read by attribute (a sweep's trial, the CLI); :meth:`summary` is
@@ -173,6 +242,7 @@ class RunResult:
     recording: str | None = None
     robot: str | None = None
     parameters: dict[str, Any] | None = None
+    attempts: list[Attempt] | None = None
 
     @property
     def failure_text(self) -> str | None:
@@ -185,6 +255,12 @@ class RunResult:
             if first is not None:
                 text = f"{text}; first candidate: {first.kind}: {first.text}"
         return text
+
+    def _chosen_label(self) -> str | None:
+        planning = self.planning
+        if planning is None or planning.chosen is None:
+            return None
+        return planning.candidates[planning.chosen].label
 
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable summary (the keys are an interface: see docs/cli.md)."""
@@ -218,6 +294,10 @@ class RunResult:
             for e in self.events
         ]
         out["recording"] = self.recording
+        attempts = self.attempts or [
+            Attempt(1, 0, 0.0, None if self.planning is None else self._chosen_label())
+        ]
+        out["attempts"], out["replans"] = attempt_rows(attempts, self)
         if self.parameters is not None:  # only when something was varied
             out["parameters"] = self.parameters
         return out

@@ -15,8 +15,10 @@ Entity path                                Contents
 ``world/source_bin/arm_side``              label on the wall that faces the arm's base
 ``world/trials/<outcome>``                 one point per trial at its ``brick_start_xyz``,
                                            coloured by outcome (``success`` or the failure
-                                           reason), labelled ``reason · seed N`` (labels shown
-                                           up to ``MAX_SHOWN_LABELS`` failures, else on hover)
+                                           reason), labelled ``reason · seed N`` (on hover)
+``world/callouts/labels``, ``.../leaders`` up to ``MAX_SHOWN_LABELS`` failed trials: their labels
+                                           in a column outside the bin's -x wall, one row each
+                                           (never overlapping), a leader line to each point
 ``world/trials/pose_offsets``              when ``pose_noise`` is varied: an arrow per trial
                                            from the planned brick position to where it was
                                            moved after planning (the offset the run applied,
@@ -97,8 +99,14 @@ RATE_COLOR = (0.17, 0.63, 0.17)  # a bar at 100 %
 RATE_MID_COLOR = (0.93, 0.67, 0.10)  # at 50 %
 RATE_LOW_COLOR = (0.84, 0.15, 0.16)  # at 0 %
 ENCODE_TIMEOUT_S = 30.0  # bound on encoding what was logged (normally milliseconds) [s]
-# Trial labels are shown when at most this many failed trials are drawn (else on hover only).
+# Failed trials get a callout (label in a column, leader line to the point) when at most this
+# many are drawn, else their labels show on hover only: the column beside the bin's 0.30 m side
+# then spaces labels 20 mm apart, about a label's height in the sweep's view.
 MAX_SHOWN_LABELS = 15
+# The callout column stands this far outside the bin's -x wall [m]: labels are centred on their
+# anchor, and "missed-grasp · seed 14" spans about 0.16 m in the sweep's view.
+CALLOUT_OFFSET = 0.13
+CALLOUT_LINE_COLOR = (0.6, 0.6, 0.6)
 
 
 def outcome_colors(outcomes: Sequence[str]) -> dict[str, tuple[float, float, float]]:
@@ -174,20 +182,15 @@ def _log_trials(
     for t in trials:
         if t.get("brick_start_xyz") is not None:
             by_outcome.setdefault(outcome_of(t), []).append(t)
-    failed = sum(len(g) for o, g in by_outcome.items() if o != "success")
     for outcome, group in by_outcome.items():
-        labels = [
-            f"seed {t['seed']}" if outcome == "success" else f"{outcome} · seed {t['seed']}"
-            for t in group
-        ]
         rec.log(
             f"{base}/{rr.escape_entity_path_part(outcome)}",
             rr.Points3D(
                 np.array([t["brick_start_xyz"] for t in group], dtype=np.float64),
                 radii=[POINT_RADIUS],
                 colors=[colors[outcome]],
-                labels=labels,
-                show_labels=outcome != "success" and failed <= MAX_SHOWN_LABELS,
+                labels=[trial_label(t) for t in group],
+                show_labels=False,  # on hover; the few failures get callouts (_log_callouts)
             ),
             static=True,
         )
@@ -204,6 +207,68 @@ def _log_trials(
             rr.Arrows3D(origins=origins, vectors=vectors, colors=arrow_colors, radii=[0.001]),
             static=True,
         )
+
+
+def trial_label(trial: Mapping[str, Any], arm: str = "") -> str:
+    """A trial's label: ``seed 9`` for a success, ``missed-grasp · seed 14`` for a failure
+    (prefixed by its arm in a comparison, ``controller=pinv: …``)."""
+    outcome = outcome_of(trial)
+    text = f"seed {trial['seed']}" if outcome == "success" else f"{outcome} · seed {trial['seed']}"
+    return f"{arm}: {text}" if arm else text
+
+
+def callout_anchors_W(bin_: BinGeometry, p_W: np.ndarray) -> np.ndarray:
+    """Where the callouts of points ``p_W`` (n, 3) [m] are anchored: a column outside the bin's
+    -x wall at floor height, evenly spaced over the bin's y extent, in the order of the
+    points' y in the bin frame (top to bottom), so leader lines do not cross needlessly and no
+    two labels share a row."""
+    hx, hy = bin_.inner_half_extents
+    R_WB = bin_.X_WB.rotation().as_matrix()
+    p_WB = bin_.X_WB.translation()
+    y_B = (p_W - p_WB) @ R_WB[:, 1]
+    n = len(p_W)
+    step = 2.0 * hy / max(n, 1)
+    anchors_B = np.zeros((n, 3))
+    for row, i in enumerate(np.argsort(-y_B, kind="stable")):
+        anchors_B[i] = (-hx - CALLOUT_OFFSET, hy - (row + 0.5) * step, 0.0)
+    anchors_W = anchors_B @ R_WB.T + p_WB
+    anchors_W[:, 2] = bin_.floor_top_z
+    return anchors_W
+
+
+def _log_callouts(
+    rec: rr.RecordingStream,
+    bin_: BinGeometry,
+    failed: Sequence[tuple[np.ndarray, str, tuple[float, float, float]]],
+) -> None:
+    """Labels of the failed trials in a column beside the bin, each joined to its point by a
+    leader line, when there are at most :data:`MAX_SHOWN_LABELS` (labels drawn at the points
+    themselves overlap wherever two failures lie close)."""
+    if not failed or len(failed) > MAX_SHOWN_LABELS:
+        return
+    p_W = np.array([p for p, _, _ in failed], dtype=np.float64)
+    anchors_W = callout_anchors_W(bin_, p_W)
+    colors = [c for _, _, c in failed]
+    rec.log(
+        "world/callouts/labels",
+        rr.Points3D(
+            anchors_W,
+            radii=[0.5 * POINT_RADIUS],
+            colors=colors,
+            labels=[label for _, label, _ in failed],
+            show_labels=True,
+        ),
+        static=True,
+    )
+    rec.log(
+        "world/callouts/leaders",
+        rr.LineStrips3D(
+            [np.vstack([a, p]) for a, p in zip(anchors_W, p_W, strict=True)],
+            colors=[CALLOUT_LINE_COLOR],
+            radii=[0.0006],
+        ),
+        static=True,
+    )
 
 
 def _pose_offset(trial: Mapping[str, Any], draw: ParameterDraw | None) -> np.ndarray | None:
@@ -679,10 +744,16 @@ def log_sweep(
     _log_bin(rec, scene.source_bin, scene.robot.p_W_base)
     arms = _arms_of(trials)
     legend: list[tuple[str, tuple[float, float, float]]] = []
+    failed: list[tuple[np.ndarray, str, tuple[float, float, float]]] = []
     for arm in arms or [""]:
         group = [t for t in trials if t.get("arm", "") == arm] if arm else list(trials)
         base = f"world/trials/{_arm_part(arm)}" if arm else "world/trials"
         _log_trials(rec, group, by_seed, colors, base)
+        failed += [
+            (np.asarray(t["brick_start_xyz"], dtype=np.float64), trial_label(t, arm), colors[o])
+            for t in group
+            if (o := outcome_of(t)) != "success" and t.get("brick_start_xyz") is not None
+        ]
         counts: dict[str, int] = {}
         for t in group:
             counts[outcome_of(t)] = counts.get(outcome_of(t), 0) + 1
@@ -693,6 +764,7 @@ def log_sweep(
             for spec in plan.specs:
                 _log_bins(rec, spec, stats[spec.name], chart_path(spec.name, arm))
     _log_legend(rec, scene.source_bin, legend)
+    _log_callouts(rec, scene.source_bin, failed)
     text = report_markdown(report)
     rec.log("report", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
     return by_parameter

@@ -152,6 +152,7 @@ def outcome_report(
     errors = [t["place_error_m"] for t in ok if t.get("place_error_m") is not None]
     place = percentiles(errors)
     slips = [t["max_slip_m"] for t in full if t.get("max_slip_m") is not None]
+    replanned = [t for t in full if (t.get("attempts") or 1) > 1]
     return {
         "completed": len(trials),
         "successes": len(ok),
@@ -167,6 +168,10 @@ def outcome_report(
         "min_singular_value": min(_present(full, "min_singular_value"), default=None),
         "max_joint_speed_ratio": max(_present(full, "max_joint_speed_ratio"), default=None),
         "max_slip_m": max(slips, default=None) if full else None,
+        "replanned": {
+            "trials": len(replanned),
+            "successes": sum(1 for t in replanned if t["success"]),
+        },
     }
 
 
@@ -272,6 +277,12 @@ def _value(v: float | None, scale: float) -> str:
 
 def _outcome_lines(r: Mapping[str, Any], plan_units: Mapping[str, str], indent: str) -> list[str]:
     lines = []
+    replanned = r.get("replanned") or {}
+    if replanned.get("trials"):
+        lines.append(
+            f"{indent}replanned: {replanned['trials']} trials took more than one attempt "
+            f"(--attempts), {replanned['successes']} of them succeeded"
+        )
     for reason, f in r["failures"].items():
         seeds = f["seeds"]
         shown = " ".join(map(str, seeds[:SHOWN_SEEDS])) + (" …" if len(seeds) > SHOWN_SEEDS else "")

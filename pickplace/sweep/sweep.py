@@ -174,6 +174,7 @@ class SweepRequest:
         trial_timeout_s: Time limit of one trial in a worker process [s] (see the module
             docstring), in :data:`TRIAL_TIMEOUT_RANGE_S`; None: :data:`DEFAULT_TRIAL_TIMEOUT_S`.
             Not with the Ray backend (its tasks have no time limit yet).
+        attempts: Most attempts each run may take (``--attempts``).
     """
 
     scenario: str = "pick-place-random"
@@ -189,11 +190,18 @@ class SweepRequest:
     address: str | None = None
     robot: str = DEFAULT_ROBOT
     trial_timeout_s: float | None = None
+    attempts: int = 1
 
     def specs(self) -> tuple[TrialSpec, ...]:
         """One trial spec per arm (one without a comparison), in the order of the values."""
         base = TrialSpec(
-            self.scenario, self.controller, self.speed, self.control_rate_hz, self.vary, self.robot
+            self.scenario,
+            self.controller,
+            self.speed,
+            self.control_rate_hz,
+            self.vary,
+            self.robot,
+            self.attempts,
         )
         if self.compare is None:
             return (base,)
@@ -399,6 +407,7 @@ def sweep_report(
         "workers": workers if workers is not None else req.resolved_workers(),
         "speed": req.speed,
         "control_rate_hz": req.control_rate_hz,
+        "attempts": req.attempts,
         "vary": req.vary.as_dict(),
         "vary_text": req.vary.describe(),
         "compare_flag": None if compare is None else compare.flag(),

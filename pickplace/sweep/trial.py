@@ -2,9 +2,9 @@
 
 A trial is a run request without its seed, plus the seed. What a sweep keeps of its run is the
 compact summary (:func:`compact_summary`: the keys in :data:`TRIAL_KEYS`, the failure's text,
-the drawn parameters), about 0.6 kB; a trial that gave no summary (its worker died or raised)
-is a lost-trial entry (:func:`lost_trial`). Both backends (:mod:`pickplace.sweep.sweep`,
-:mod:`pickplace.sweep.ray_backend`) run :func:`guarded_trial`.
+the number of attempts, the drawn parameters), about 0.6 kB; a trial that gave no summary (its
+worker died or raised) is a lost-trial entry (:func:`lost_trial`). Both backends
+(:mod:`pickplace.sweep.sweep`, :mod:`pickplace.sweep.ray_backend`) run :func:`guarded_trial`.
 """
 
 from __future__ import annotations
@@ -68,6 +68,8 @@ class TrialSpec:
         control_rate_hz: IK rate [Hz] (unless ``control_rate`` is varied).
         vary: The varied parameters, drawn per trial from its seed.
         robot: A bundled robot's name or a ``robot.toml`` path.
+        attempts: Most attempts each run may take (``--attempts``, see
+            :mod:`pickplace.sim.recovery`).
         arm: Label of the arm in a comparison, e.g. ``controller=dls`` ("" without one).
     """
 
@@ -77,6 +79,7 @@ class TrialSpec:
     control_rate_hz: float = 100.0
     vary: VaryPlan = field(default_factory=VaryPlan)
     robot: str = DEFAULT_ROBOT
+    attempts: int = 1
     arm: str = ""
 
     def request(self, seed: int) -> RunRequest:
@@ -89,6 +92,7 @@ class TrialSpec:
             control_rate_hz=self.control_rate_hz,
             speed=self.speed,
             parameters=self.vary.draw(seed) if self.vary.specs else None,
+            attempts=self.attempts,
         )
 
     def rerun_command(self, seed: int) -> str:
@@ -101,6 +105,8 @@ class TrialSpec:
             args += ["--speed", repr(self.speed)]
         if self.control_rate_hz != 100.0:
             args += ["--control-rate", repr(self.control_rate_hz)]
+        if self.attempts != 1:
+            args += ["--attempts", str(self.attempts)]
         for spec in self.vary.specs:
             args += ["--vary", spec.flag()]
         return shlex.join(args)
@@ -114,6 +120,7 @@ def compact_summary(result: RunResult, arm: str = "") -> dict[str, Any]:
     summary = result.summary()
     out = {k: _finite_or_none(summary.get(k)) for k in TRIAL_KEYS}
     out["failure_text"] = result.failure_text
+    out["attempts"] = len(summary["attempts"])
     if result.parameters is not None:
         out["parameters"] = result.parameters
     if arm:

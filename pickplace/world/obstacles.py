@@ -282,6 +282,7 @@ def with_obstacles(scene: Scene, cell: ObstacleCell) -> Scene:
         raise SceneError("the scene keeps no spec to add obstacles to; load it with load_scene")
     spec = scene.spec.copy()
     add_to_spec(spec, scene, cell)
+    arm_spec = spec.copy()  # (unused: the scene's arm model is kept)
     try:
         model = spec.compile()
     except ValueError as exc:
@@ -298,7 +299,9 @@ def with_obstacles(scene: Scene, cell: ObstacleCell) -> Scene:
         if not same:
             raise SceneError("the obstacles moved an id of the scene; valid: appended bodies")
     robot = scene.robot
-    new = build_scene(Composition(spec, model, robot), scene.path, scene.names, scene.arm_model)
+    new = build_scene(
+        Composition(spec, model, robot, arm_spec), scene.path, scene.names, scene.arm_model
+    )
     robot.write_home(new.model, robot.q_home, robot.home_width)
     return dataclasses.replace(new, obstacles=cell)
 

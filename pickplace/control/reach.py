@@ -1,0 +1,128 @@
+"""How far the tool reaches along a line of poses, found by IK rather than assumed.
+
+A closed form (upper arm plus forearm from the shoulder, the tool hanging below the wrist as at
+home) holds only for arms whose pitch axes are in line with their links; Menagerie's iiwa 14 and
+Panda have offsets that put its answer 13 and 25 mm beyond what they reach. Here the reach is
+what the arm does: a pose is reachable when damped least-squares IK, within the joint limits,
+brings the tool onto it, and the farthest reachable pose along a line is found by bisection,
+each IK warm-started from the last reachable solution.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import mujoco
+import numpy as np
+from mink.lie import SE3, SO3
+
+from pickplace.errors import PlanError
+
+REACHED = 1e-6
+"""A pose counts as reached when the tool is within this of it, position [m] and orientation
+[rad] together (the norm of the 6-vector error)."""
+
+_MAX_ITERATIONS = 400
+_MAX_STEP = 0.1  # largest joint step of one IK iteration [rad]
+_DAMPING = 1e-6  # λ² of the damped least squares [m², rad²]
+
+
+class ReachIK:
+    """Damped least-squares IK of the tool site on an arm-only model, within joint limits.
+
+    Args:
+        model: Arm-only model (every joint an arm joint, nq = nv).
+        site_id: The tool site.
+        q_min: Lower joint limits [rad] (−inf for a continuous joint).
+        q_max: Upper joint limits [rad].
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, site_id: int, q_min: np.ndarray, q_max: np.ndarray
+    ) -> None:
+        if model.nq != model.nv:
+            raise PlanError(f"reach IK needs an arm-only model (nq = nv), got nq {model.nq}")
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.site_id = site_id
+        self.q_min = np.asarray(q_min, dtype=float)
+        self.q_max = np.asarray(q_max, dtype=float)
+        self._J = np.zeros((6, model.nv))
+
+    def error(self, q: np.ndarray, X_WG_target: SE3) -> np.ndarray:
+        """Tool error at ``q``: [p_target − p; log(R_target R⁻¹)] in world ([m], [rad])."""
+        d = self.data
+        d.qpos[:] = q
+        mujoco.mj_kinematics(self.model, d)
+        R_WG = SO3.from_matrix(d.site_xmat[self.site_id].reshape(3, 3))
+        e = np.empty(6)
+        e[:3] = X_WG_target.translation() - d.site_xpos[self.site_id]
+        e[3:] = (X_WG_target.rotation() @ R_WG.inverse()).log()
+        return e
+
+    def solve(self, X_WG_target: SE3, q0: np.ndarray) -> tuple[np.ndarray, float]:
+        """IK from ``q0`` towards ``X_WG_target``.
+
+        Returns:
+            The joint positions reached [rad] and the norm of the remaining error.
+        """
+        q = np.clip(np.asarray(q0, dtype=float), self.q_min, self.q_max)
+        eye = np.eye(6)
+        norm = np.inf
+        for _ in range(_MAX_ITERATIONS):
+            e = self.error(q, X_WG_target)
+            norm = float(np.linalg.norm(e))
+            if norm < REACHED:
+                break
+            mujoco.mj_comPos(self.model, self.data)
+            mujoco.mj_jacSite(self.model, self.data, self._J[:3], self._J[3:], self.site_id)
+            J = self._J
+            dq = J.T @ np.linalg.solve(J @ J.T + _DAMPING * eye, e)
+            step = float(np.abs(dq).max())
+            if step > _MAX_STEP:
+                dq *= _MAX_STEP / step
+            q = np.clip(q + dq, self.q_min, self.q_max)
+        return q, norm
+
+
+def farthest_reachable(
+    ik: ReachIK,
+    pose_at: Callable[[float], SE3],
+    q_start: np.ndarray,
+    r_near: float,
+    r_far: float,
+    tolerance: float = 1e-4,
+) -> float:
+    """The largest r in [``r_near``, ``r_far``] whose pose ``pose_at(r)`` the IK reaches.
+
+    Bisection on r: the reachable end of the bracket keeps its IK solution, from which the next
+    trial starts, so each trial is a short step along the line.
+
+    Args:
+        ik: The IK.
+        pose_at: The line of tool poses, by distance along it [m].
+        q_start: Where the IK first starts (e.g. the home posture) [rad].
+        r_near: A distance whose pose is reachable [m].
+        r_far: A distance whose pose is not [m].
+        tolerance: Width of the final bracket [m].
+
+    Raises:
+        PlanError: ``pose_at(r_near)`` is not reachable, or ``pose_at(r_far)`` is.
+    """
+    q_near, err = ik.solve(pose_at(r_near), q_start)
+    if err >= REACHED:
+        raise PlanError(
+            f"the tool cannot reach the line's near end at {r_near:.3f} m (error {err:.2g}); "
+            f"valid: a line that starts within reach"
+        )
+    if ik.solve(pose_at(r_far), q_near)[1] < REACHED:
+        raise PlanError(f"the tool still reaches the line at {r_far:.3f} m: no reach limit on it")
+    lo, hi = r_near, r_far
+    while hi - lo > tolerance:
+        mid = 0.5 * (lo + hi)
+        q_mid, err = ik.solve(pose_at(mid), q_near)
+        if err < REACHED:
+            lo, q_near = mid, q_mid
+        else:
+            hi = mid
+    return lo

@@ -1,0 +1,420 @@
+"""Trying again after a missed grasp or a drop: stop the arm, wait for the brick, plan anew.
+
+:class:`Reattempt` is a task's :class:`~pickplace.sim.task.Recovery`. The loop asks it about the
+failures of every assessed block; it takes up those in :data:`RECOVERABLE` while attempts are
+left, and then:
+
+1. **stops the arm** without a velocity step: from the last commanded tick on, the plan being
+   executed is replaced by a :class:`StopTrajectory`, the same plan slowed down along its own
+   (pre-flighted) path, its speed falling smoothly to zero (``1 - 3u² + 2u³`` of the planned
+   speed over the stop time, u = t / T), while the gripper opens as wide as the plan ever
+   does (so that a brick caught between the fingers falls free);
+2. **backs off** straight up (:attr:`RecoveryConfig.rise`, at rest at both ends) and **waits
+   for the brick** to be at rest and free of the robot (checked after every block of the
+   loop, at most :attr:`RecoveryConfig.max_wait` after the arm has come to rest);
+3. **plans again** with the task's planner from the brick's pose as the simulation has it and
+   from where the arm stopped (its commanded configuration and the stop's tool pose), and puts
+   the new plan in place from the next tick: the next attempt, judged by a new set of the
+   goal's checks.
+
+A failure it does not take up ends the run as it would without it, with the same reason and
+text; so does a failure after the last attempt. When the brick does not come to rest in time,
+or it rests tilted from upright (the placement verdict wants its z axis up, and a top-down
+grasp does not turn it over), or no plan is feasible from where it lies, the run ends with the
+failure that was taken up, at its tick, its text saying why it could not be recovered.
+
+Which failures are recoverable (:data:`RECOVERABLE`): ``missed-grasp`` and ``dropped``, where
+the brick lies somewhere in the world the arm left intact. Not ``collision`` (the robot hit
+the world: a real cell stops), ``ik-failed`` and ``limit-violated`` (the controller cannot
+follow plans from here: a new plan from the same state would fail again), ``nan`` (the state
+is lost), ``not-in-target-bin`` (the end-state verdict, judged when the run is over) nor
+``interrupted``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from mink.lie import SE3
+
+from pickplace.errors import InvalidInputError, require_positive
+from pickplace.geometry import FloatArray
+from pickplace.planning.plan import Plan
+from pickplace.planning.planner import PickPlacePlanner, Start
+from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
+from pickplace.sim.checks import Failure, FailureReason
+from pickplace.sim.task import RunControl
+from pickplace.sim.verdict import Attempt, brick_at_rest, brick_pose, brick_touches_robot
+
+RECOVERABLE: frozenset[FailureReason] = frozenset(
+    {FailureReason.MISSED_GRASP, FailureReason.DROPPED}
+)
+"""The failures a run may try again after (see the module docstring)."""
+
+_SINE = profile_by_name("sine")
+
+MAX_ATTEMPTS = 10
+"""The most attempts a run may take (``--attempts``)."""
+
+
+@dataclass(frozen=True)
+class RecoveryConfig:
+    """How a run stops and waits between attempts.
+
+    Attributes:
+        accel_fraction: Fraction of each joint's acceleration limit the stop's own
+            deceleration may take [-]: the stop lasts ``1.5 |q̇ᵢ| / (fraction · q̈ᵢ,max)`` for
+            the fastest-braking joint i (1.5 is the peak of the speed profile's slope), and
+            the rest is left to the plan's own acceleration, which the slow-down scales by the
+            square of the falling speed.
+        min_stop_time: Shortest stop [s] (the gripper opens over it).
+        rise: Height the tool backs off straight up after stopping [m], at most (never above
+            the planner's transfer clearance height).
+        rise_speed: Peak speed of that rise [m/s].
+        rise_accel: Peak acceleration of that rise [m/s²].
+        max_wait: Longest wait after the arm has stopped for the brick to come to rest and be
+            free of the robot [s].
+        rest_window: The brick must have moved less than ``rest_speed`` times this over the
+            last this many seconds, besides being at rest at the end (a bounce's top is
+            momentarily at rest) [s].
+        default_accel_time: For a robot without ``accel_limits``: the time in which a joint
+            reaches its speed limit, as the planner's timing assumes [s].
+    """
+
+    accel_fraction: float = 0.5
+    min_stop_time: float = 0.15
+    rise: float = 0.10
+    rise_speed: float = 0.25
+    rise_accel: float = 0.5
+    max_wait: float = 3.0
+    rest_window: float = 0.1
+    default_accel_time: float = 0.25
+
+    def __post_init__(self) -> None:
+        """Validate every field (finite and > 0; ``accel_fraction`` at most 1)."""
+        for name in (
+            "accel_fraction",
+            "min_stop_time",
+            "rise",
+            "rise_speed",
+            "rise_accel",
+            "max_wait",
+            "rest_window",
+            "default_accel_time",
+        ):
+            require_positive(f"recovery {name}", getattr(self, name))
+        if self.accel_fraction > 1.0:
+            raise InvalidInputError(
+                f"recovery accel_fraction must be in (0, 1], got {self.accel_fraction!r}"
+            )
+
+
+def check_attempts(attempts: object) -> int:
+    """``attempts`` as the number of attempts a run may take.
+
+    Raises:
+        InvalidInputError: Not an integer in [1, :data:`MAX_ATTEMPTS`] (field ``attempts``).
+    """
+    if (
+        isinstance(attempts, bool)
+        or not isinstance(attempts, int)
+        or not 1 <= attempts <= MAX_ATTEMPTS
+    ):
+        raise InvalidInputError(
+            f"attempts must be an integer in [1, {MAX_ATTEMPTS}], got {attempts!r}",
+            field="attempts",
+        )
+    return attempts
+
+
+class StopTrajectory(PoseTrajectory):
+    """A plan's trajectory from time ``t0`` on, slowed down to rest along its own path, then
+    backed off straight up with the gripper open, then held.
+
+    With u = t / T over the stop time T, the tool is where the plan is at ``t0 + s(t)``,
+    s = T (u − u³ + u⁴ / 2), and moves at the plan's velocity there times
+    ṡ = 1 − 3u² + 2u³: the full planned velocity at t = 0 (no step), zero at T, the slow-down
+    smooth (s̈ = 0 at both ends, at most 1.5 / T). The gripper's command ramps linearly from
+    ``width0`` to ``width_open`` over the stop. Then the tool rises ``rise`` along world z
+    under a sine profile (at rest at both ends; straight up is how the plan leaves the pick),
+    so that the fingers leave a brick that leans on them, and holds there.
+
+    Its keyframes (``stop`` at 0, ``stopped`` at T, ``backed-off`` after the rise, ``hold``
+    ``hold`` later) are the poses at those times; between the first two the path is the
+    plan's, not a straight line, so it is a trajectory to execute, not one to time again.
+
+    Args:
+        path: The plan's trajectory.
+        t0: Plan time of the stop's start [s].
+        stop_time: T [s].
+        rise: Height the tool backs off after stopping [m] (≥ 0).
+        rise_time: Duration of the rise [s].
+        hold: How long the backed-off pose is held [s].
+        width0: Gripper command at the start [m].
+        width_open: Gripper command from T on [m].
+    """
+
+    def __init__(
+        self,
+        path: PoseTrajectory,
+        t0: float,
+        stop_time: float,
+        rise: float,
+        rise_time: float,
+        hold: float,
+        width0: float,
+        width_open: float,
+    ) -> None:
+        require_positive("stop time [s]", stop_time)
+        require_positive("rise time [s]", rise_time)
+        require_positive("hold [s]", hold)
+        self.path = path
+        self.t0 = float(t0)
+        self.stop_time = float(stop_time)
+        self.rise = float(rise)
+        self.rise_time = float(rise_time)
+        self.width0 = float(width0)
+        self.width_open = float(width_open)
+        x_start = path.sample(self.t0)[0]
+        self.x_stopped = path.sample(self.t0 + 0.5 * self.stop_time)[0]
+        self.x_backed_off = self.x_stopped.copy()
+        self.x_backed_off[6] += self.rise
+        T = self.stop_time
+        self.rest_time = T + self.rise_time  # from here on the tool is at rest
+        X_stopped, X_rest = SE3(wxyz_xyz=self.x_stopped), SE3(wxyz_xyz=self.x_backed_off)
+        w = self.width_open
+        super().__init__(
+            [
+                Keyframe("stop", 0.0, SE3(wxyz_xyz=x_start), self.width0),
+                Keyframe("stopped", T, X_stopped, w),
+                Keyframe("backed-off", self.rest_time, X_rest, w),
+                Keyframe("hold", self.rest_time + hold, X_rest, w),
+            ],
+            "linear",
+        )
+
+    @property
+    def X_WG_rest(self) -> SE3:
+        """The tool pose the arm comes to rest at (backed off)."""
+        return SE3(wxyz_xyz=self.x_backed_off.copy())
+
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray, float]:
+        """Pose, spatial velocity [m/s, rad/s] and gripper width [m] at stop time ``t`` [s]
+        (see the class docstring)."""
+        T = self.stop_time
+        if t >= self.rest_time:
+            return self.x_backed_off.copy(), np.zeros(6), self.width_open
+        if t >= T:
+            tau = (t - T) / self.rise_time
+            x = self.x_stopped.copy()
+            x[6] += self.rise * _SINE.s(tau)
+            V = np.zeros(6)
+            V[2] = self.rise * _SINE.ds(tau) / self.rise_time
+            return x, V, self.width_open
+        u = max(t, 0.0) / T
+        s = T * (u - u**3 + 0.5 * u**4)
+        s_dot = 1.0 - 3.0 * u * u + 2.0 * u**3
+        x, V, _ = self.path.sample(self.t0 + s)
+        return x, V * s_dot, self.width0 + u * (self.width_open - self.width0)
+
+
+def stop_time(run: RunControl, config: RecoveryConfig) -> float:
+    """How long the arm takes to stop from its last commanded joint speeds [s] (see
+    :attr:`RecoveryConfig.accel_fraction`)."""
+    robot = run.scene.robot
+    a_max = robot.a_max if robot.a_max is not None else robot.v_max / config.default_accel_time
+    qdot = np.abs(run.log.qdot_cmd[run.ticks - 1])
+    needed = 1.5 * float(np.max(qdot / (config.accel_fraction * np.asarray(a_max))))
+    return max(config.min_stop_time, needed)
+
+
+class Reattempt:
+    """The recovery of a pick-and-place task: up to ``attempts`` attempts (module docstring).
+
+    Args:
+        planner: The task's planner (it made the first plan).
+        X_WO_goal: Goal pose of the brick in world.
+        attempts: Most attempts the run may take (1: every failure ends the run, as without a
+            recovery).
+        first_candidate: Label of the first plan's candidate (None: made without the planner).
+        config: How the arm stops and how long the brick is waited for.
+
+    Raises:
+        InvalidInputError: ``attempts`` is not an integer in [1, :data:`MAX_ATTEMPTS`].
+    """
+
+    def __init__(
+        self,
+        planner: PickPlacePlanner,
+        X_WO_goal: SE3,
+        attempts: int,
+        first_candidate: str | None,
+        config: RecoveryConfig | None = None,
+    ) -> None:
+        self.planner = planner
+        self.X_WO_goal = X_WO_goal
+        self.max_attempts = check_attempts(attempts)
+        self.config = config or RecoveryConfig()
+        self._attempts: list[Attempt] = [Attempt(1, 0, 0.0, first_candidate)]
+        self._stop: StopTrajectory | None = None  # while stopping and waiting
+        self._taken: Failure | None = None  # the failure taken up, while stopping
+
+    def attempts(self) -> list[Attempt]:
+        """The attempts so far (the last one is running, or ended the run)."""
+        return list(self._attempts)
+
+    def take_up(self, run: RunControl, failures: Sequence[Failure]) -> bool:
+        """Take the block's failures up if all are recoverable, the arm is executing an
+        attempt (not stopping after one) and attempts are left: stop the arm (module
+        docstring) and return True."""
+        if (
+            self._stop is not None
+            or len(self._attempts) >= self.max_attempts
+            or not failures
+            or any(f.reason not in RECOVERABLE for f in failures)
+            or run.ticks < 1
+        ):
+            return False
+        failure = failures[0]
+        k = run.ticks - 1  # the last commanded tick: the stop starts from its plan sample
+        dt = run.dt
+        t_stop = stop_time(run, self.config)
+        plan = run.plan
+        width0 = float(run.log.gripper_cmd[k])
+        width_open = max(width0, *(kf.gripper_width for kf in plan.trajectory.keyframes))
+        t0 = k * dt - run.plan_start
+        cfg = self.config
+        z_stopped = float(plan.trajectory.sample(t0 + 0.5 * t_stop)[0][6])
+        rise = min(cfg.rise, max(0.0, self.planner.clearance_z - z_stopped))
+        rise_time = max(cfg.min_stop_time, _SINE.min_duration(rise, cfg.rise_speed, cfg.rise_accel))
+        stop = StopTrajectory(
+            plan.trajectory, t0, t_stop, rise, rise_time, cfg.max_wait, width0, width_open
+        )
+        current = self._attempts[-1]
+        text = f"{failure.reason.value}: {failure.text}"
+        try:
+            run.replace_plan(
+                Plan(stop),
+                k * dt,
+                f"attempt {current.number} of {self.max_attempts} failed at t="
+                f"{(failure.tick + 1) * dt:.2f} s ({text}); the arm stops along its path over "
+                f"{t_stop:.2f} s, the gripper opening, backs off {rise * 1000:.0f} mm up and "
+                "waits for the brick to rest",
+            )
+        except InvalidInputError:  # the run's log would pass its memory bound
+            return False
+        self._attempts[-1] = Attempt(
+            current.number,
+            current.start_tick,
+            current.start_time_s,
+            current.candidate,
+            failure.reason,
+            failure.tick,
+            (failure.tick + 1) * dt,
+            text,
+            run.ticks,
+        )
+        self._stop, self._taken = stop, failure
+        return True
+
+    def next_decision_time(self, run: RunControl) -> float | None:
+        """While attempts are left: the run time at which the attempt's grasp is judged (the
+        plan's ``grip_closed``), if it lies ahead; the stop then starts while the arm still
+        rests at the pick, before the lift drags a brick the fingers caught by an edge."""
+        phases = run.plan.phases
+        if self._stop is not None or len(self._attempts) >= self.max_attempts or phases is None:
+            return None
+        t = run.plan_start + phases.grip_closed
+        return t if t > run.ticks * run.dt else None
+
+    def after_block(self, run: RunControl) -> Failure | None:
+        """While stopped: once the arm has stopped and the brick rests free of the robot,
+        plan the next attempt from there and put it in place; give up (the failure taken up,
+        with why) when the brick does not rest in time or no plan is feasible."""
+        stop, taken = self._stop, self._taken
+        if stop is None or taken is None:
+            return None
+        t_plan = run.ticks * run.dt - run.plan_start
+        if t_plan < stop.rest_time:
+            return None
+        ready, why = self._brick_ready(run)
+        if not ready:
+            if t_plan >= stop.rest_time + self.config.max_wait:
+                return self._give_up(
+                    taken, f"{why} {self.config.max_wait:g} s after the arm stopped"
+                )
+            return None
+        X_WO = brick_pose(run.scene, run.data)
+        tilt = math.acos(min(1.0, max(-1.0, float(X_WO.rotation().as_matrix()[2, 2]))))
+        if tilt > run.criteria.max_tilt:
+            return self._give_up(
+                taken,
+                f"the brick came to rest tilted {math.degrees(tilt):.0f} deg from upright (its z "
+                f"axis from world z; the placement needs at most "
+                f"{math.degrees(run.criteria.max_tilt):.0f} deg, and a top-down grasp does not "
+                "turn it over)",
+            )
+        start = Start(run.q_cmd.copy(), stop.X_WG_rest)
+        report = self.planner.plan(X_WO, self.X_WO_goal, start=start)
+        if not report.feasible:
+            p = X_WO.translation()
+            return self._give_up(
+                taken,
+                f"no new plan picks it where it lies at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) "
+                f"m: {report.refusal()}",
+            )
+        assert report.chosen is not None
+        chosen = report.candidates[report.chosen]
+        number = len(self._attempts) + 1
+        p = X_WO.translation()
+        try:
+            run.replace_plan(
+                report.plan,
+                run.ticks * run.dt,
+                f"attempt {number} of {self.max_attempts}: plan '{chosen.label}' (candidate "
+                f"{report.chosen + 1} of {len(report.candidates)}) picks the brick where it "
+                f"rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m",
+            )
+        except InvalidInputError as exc:  # the run's log would pass its memory bound
+            return self._give_up(taken, str(exc))
+        self._attempts.append(Attempt(number, run.ticks, run.ticks * run.dt, chosen.label))
+        self._stop = self._taken = None
+        return None
+
+    def _brick_ready(self, run: RunControl) -> tuple[bool, str]:
+        """Whether the brick rests free of the robot, or why not (its words end a sentence
+        that a time completes)."""
+        scene, data, cr = run.scene, run.data, run.criteria
+        window = max(1, round(self.config.rest_window / run.dt))
+        b = scene.brick_body_id
+        log = run.log
+        first = max(0, run.ticks - 1 - window)
+        moved = float(np.linalg.norm(log.body_pos[run.ticks - 1, b] - log.body_pos[first, b]))
+        if not brick_at_rest(scene, data, cr) or moved > cr.rest_speed * self.config.rest_window:
+            return False, "the brick was still moving"
+        if brick_touches_robot(scene, data):
+            return False, "the brick still touched the robot"
+        return True, ""
+
+    def _give_up(self, taken: Failure, why: str) -> Failure:
+        """The failure taken up, ending the run at its tick, its text saying why it was not
+        recovered; the attempt it ended is the run's last."""
+        self._stop = self._taken = None
+        last = self._attempts[-1]
+        self._attempts[-1] = Attempt(
+            last.number, last.start_tick, last.start_time_s, last.candidate
+        )
+        return Failure(taken.tick, taken.reason, f"{taken.text}; not recovered: {why}")
+
+
+__all__ = [
+    "MAX_ATTEMPTS",
+    "RECOVERABLE",
+    "Reattempt",
+    "RecoveryConfig",
+    "StopTrajectory",
+    "check_attempts",
+]
