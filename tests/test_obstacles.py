@@ -18,6 +18,7 @@ from pickplace.world.cell import Box, ObstacleCell
 from pickplace.world.obstacles import (
     BOX_BASE_RADIUS,
     BOX_BIN_MARGIN,
+    BOX_HOME_MARGIN,
     divider_box,
     draw_boxes,
     with_obstacles,
@@ -69,8 +70,19 @@ def test_random_boxes_keep_off_the_bins_and_the_base_and_follow_the_seed(scene: 
     again = draw_boxes(scene, np.random.default_rng(7), 6)
     assert boxes == again and boxes != draw_boxes(scene, np.random.default_rng(8), 6)
     base = scene.robot.p_W_base[:2]
+    from pickplace.control.kinematics import ArmKinematics
+
+    kin = ArmKinematics(scene)
+    kin.update(scene.robot.q_home)
+    home = kin.p_WG()[:2]
     for b in boxes:
         corners = b.corners_xy()
+        # The footprint's nearest point to the tool at home (a point of the box's rectangle).
+        c, s = math.cos(b.yaw), math.sin(b.yaw)
+        local = np.array([[c, s], [-s, c]]) @ (home - [b.x, b.y])
+        assert (
+            np.linalg.norm(np.maximum(np.abs(local) - [b.half_x, b.half_y], 0)) >= BOX_HOME_MARGIN
+        )
         assert np.linalg.norm(corners - base, axis=1).min() >= BOX_BASE_RADIUS - 1e-9
         for bin_ in (scene.source_bin, scene.target_bin):
             local = bin_.to_bin_frame(np.column_stack([corners, np.zeros(4)]))[:, :2]

@@ -52,6 +52,9 @@ BOX_HEIGHT = (0.10, 0.35)
 BOX_RADIUS = (0.30, 0.90)
 BOX_BIN_MARGIN = 0.03
 BOX_BASE_RADIUS = 0.30
+# What boxes keep off the tool's point at home, horizontally [m]: the hands' half-lengths
+# (73 mm for the WSG's palm, 90 mm for the Panda hand) and the clearance, rounded up.
+BOX_HOME_MARGIN = 0.12
 # Draws per box before giving up finding a free spot.
 _BOX_DRAWS = 200
 OBSTACLE_RGBA = (0.35, 0.45, 0.75, 1.0)
@@ -148,7 +151,8 @@ def draw_boxes(scene: Scene, rng: np.random.Generator, count: int) -> tuple[Box,
     """``count`` boxes drawn from ``rng``: half sizes uniform in :data:`BOX_HALF_SIZE`, height
     in :data:`BOX_HEIGHT`, yaw in [-π, π), centre uniform over the annulus
     :data:`BOX_RADIUS` around the base axis, drawn again until the footprint keeps
-    :data:`BOX_BIN_MARGIN` off every bin and :data:`BOX_BASE_RADIUS` off the base axis.
+    :data:`BOX_BIN_MARGIN` off every bin, :data:`BOX_BASE_RADIUS` off the base axis and
+    :data:`BOX_HOME_MARGIN` off the tool at the robot's home (where every plan starts).
 
     Raises:
         InvalidInputError: ``count`` is not an integer in [0, :data:`MAX_BOXES`].
@@ -160,6 +164,7 @@ def draw_boxes(scene: Scene, rng: np.random.Generator, count: int) -> tuple[Box,
         raise InvalidInputError(f"box count must lie in [0, {MAX_BOXES}], got {count}")
     base = np.asarray(scene.robot.p_W_base, dtype=np.float64)[:2]
     bins = [(R, o, h + BOX_BIN_MARGIN) for R, o, h in _bins(scene)]
+    home = _home_tool_xy(scene)
     r_lo, r_hi = BOX_RADIUS
     boxes: list[Box] = []
     for _ in range(int(count)):
@@ -182,11 +187,25 @@ def draw_boxes(scene: Scene, rng: np.random.Generator, count: int) -> tuple[Box,
                 continue
             if any(_overlaps(corners, R, o, h) for R, o, h in bins):
                 continue
+            c, s_ = math.cos(box.yaw), math.sin(box.yaw)
+            local = np.array([[c, s_], [-s_, c]]) @ (home - [box.x, box.y])
+            outside = np.maximum(np.abs(local) - [box.half_x, box.half_y], 0.0)
+            if float(np.linalg.norm(outside)) < BOX_HOME_MARGIN:
+                continue
             boxes.append(box)
             break
         else:
             raise SceneError(f"no free spot for obstacle box {len(boxes) + 1} in the cell")
     return tuple(boxes)
+
+
+def _home_tool_xy(scene: Scene) -> np.ndarray:
+    """The tool's point at the robot's home, horizontally (2,) [m]."""
+    model, robot = scene.model, scene.robot
+    data = mujoco.MjData(model)
+    data.qpos[robot.arm_qpos_adr] = robot.q_home
+    mujoco.mj_kinematics(model, data)
+    return np.array(data.site_xpos[robot.tool_site_id][:2], dtype=np.float64)
 
 
 # ------------------------------------------------------------------------------- the spec
