@@ -623,6 +623,7 @@ def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
         "seed": req.seed,
         **report.as_dict(),
         "planning_time_s": report.planning_time_s,
+        "planner_time_s": dict(report.planner_time_s),
     }
     _write_stdout(json.dumps(out) if args.json else _human_plan(out))
     return EXIT_OK if report.feasible else EXIT_FAILED
@@ -636,6 +637,12 @@ def _human_plan(p: dict[str, Any]) -> str:
     else:
         head += f"NO feasible plan ({n} candidate(s) tried"
     lines = [head + f" in {p['planning_time_s'] * 1000:.1f} ms)"]
+    per = p.get("planner_time_s") or {}
+    if per:
+        lines.append(
+            "  planners: "
+            + ", ".join(f"{name} {seconds * 1000:.1f} ms" for name, seconds in per.items())
+        )
     m = p["margins"]
     if m:
         lines.append(
@@ -648,6 +655,11 @@ def _human_plan(p: dict[str, Any]) -> str:
         pr = c["problem"]
         verdict = "feasible" if pr is None else f"at t={pr['t']:.2f} s {pr['kind']}: {pr['text']}"
         lines.append(f"    {i}. {c['label']}: {verdict}")
+        if "motions" in c:  # its transfer was planned in C-space
+            lines.append(
+                "       motions: "
+                + ", ".join(f"{m['from']} -> {m['to']} {m['planner']}" for m in c["motions"])
+            )
     lines.append(
         "  keyframes (chosen plan):" if p["feasible"] else "  keyframes (first candidate):"
     )

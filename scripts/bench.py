@@ -14,6 +14,10 @@ Targets (figures, not tests):
   backend's on this machine, both in steady state (from the 10th result on); speed-up with 2
   workers >= 1.8; peak RSS of a 2,000-trial sweep (its process and its largest worker) and the
   bytes a trial's record takes;
+- planning with C-space paths: for every bundled robot the nominal pose behind a divider
+  wall that the Cartesian transfer runs into (0.26 m), and over pick-place-obstacles cells
+  (seeds 90000…) the planning time's percentiles, the C-space planner's share and how many
+  of its plannings found a path (figures, no target: the C-space budget is 2 s a candidate);
 - the qp collision limit's cost: the real-time factor of headless nominal runs with and
   without it and their ratio, its per-tick broad phase and rows against mink's own (figures
   without a target);
@@ -23,6 +27,7 @@ Targets (figures, not tests):
 
 Usage: python scripts/bench.py [--json] [--trials N] [--backend-trials N] [--rss-trials N]
        python scripts/bench.py --cli-only [--json]
+       python scripts/bench.py --cspace-only [--json] [--cells N]
        python scripts/bench.py --collision-only [--json] [--repeats N]
 """
 
@@ -302,6 +307,62 @@ def planning_times() -> dict[str, float]:
     }
 
 
+# The divider of the C-space planning figures [m]: the Cartesian transfer's brick runs into it.
+CSPACE_DIVIDER = 0.26
+CSPACE_FIRST_SEED = 90000
+
+
+def cspace_planning_times(cells: int) -> dict[str, Any]:
+    """Planning with C-space transfers: per bundled robot the nominal pose behind a
+    CSPACE_DIVIDER wall (wall time, the C-space planner's part, feasible), and over ``cells``
+    pick-place-obstacles cells for the default robot the planning time's p50, p90 and max
+    [ms], the C-space part's, and the fraction of plannings that used and found a C-space
+    path."""
+    from pickplace.sim.scenarios import obstacle_cell
+    from pickplace.world.cell import ObstacleCell
+    from pickplace.world.obstacles import with_obstacles
+
+    out: dict[str, Any] = {}
+
+    def plan(scene: Any, seed: int) -> Any:
+        X_pick = brick_on_floor(scene, nominal_placement(scene), scene.source_bin.floor_top_z)
+        X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+        return PickPlacePlanner(scene, "qp", seed=seed).plan(X_pick, X_place)
+
+    for name in bundled_robots():
+        scene = with_obstacles(load_scene(None, name), ObstacleCell(CSPACE_DIVIDER))
+        report = plan(scene, 0)
+        out[f"cspace_divider_planning_ms_{name}"] = report.planning_time_s * 1e3
+        out[f"cspace_divider_cspace_ms_{name}"] = report.planner_time_s["c-space"] * 1e3
+        out[f"cspace_divider_feasible_{name}"] = report.feasible
+    base = load_scene()
+    totals, cspace_ms, ompl_ms, checks, used, found = [], [], [], [], 0, 0
+    for seed in range(CSPACE_FIRST_SEED, CSPACE_FIRST_SEED + cells):
+        report = plan(with_obstacles(base, obstacle_cell(base, seed)), seed)
+        totals.append(report.planning_time_s * 1e3)
+        if report.used_cspace:
+            used += 1
+            cspace_ms.append(report.planner_time_s["c-space"] * 1e3)
+            attempts = [c.cspace.result for c in report.candidates if c.cspace is not None]
+            ompl_ms.append(sum(r.ompl_s for r in attempts) * 1e3)
+            checks.append(sum(r.checks for r in attempts))
+            found += any(c.cspace is not None and c.cspace.result.path for c in report.candidates)
+    for key, values in (
+        ("cells_planning", totals),
+        ("cells_cspace", cspace_ms),
+        ("cells_ompl", ompl_ms),
+    ):
+        for q in (50, 90, 100):
+            label = "max" if q == 100 else f"p{q}"
+            out[f"cspace_{key}_ms_{label}"] = float(np.percentile(values, q)) if values else None
+    out["cspace_cells_checks_median"] = float(np.median(checks)) if checks else None
+    out["cspace_us_per_check"] = float(np.sum(cspace_ms) / np.sum(checks) * 1e3) if checks else None
+    out["cspace_cells"] = cells
+    out["cspace_cells_used_fraction"] = used / cells
+    out["cspace_cells_found_fraction"] = found / used if used else None
+    return out
+
+
 def tick_breakdown() -> dict[str, float]:
     """Where a headless nominal run's time goes, per control tick [µs].
 
@@ -467,10 +528,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rss-trials", type=int, default=2000, help="trials of the peak-RSS sweep")
     parser.add_argument("--cli-only", action="store_true", help="only the CLI's answer times")
     parser.add_argument(
+        "--cspace-only", action="store_true", help="only the planning times with C-space paths"
+    )
+    parser.add_argument("--cells", type=int, default=30, help="obstacle cells planned")
+    parser.add_argument(
         "--collision-only", action="store_true", help="only the qp collision limit's cost"
     )
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
+    if args.cspace_only:
+        report.update(cspace_planning_times(args.cells))
+        print(json.dumps(report) if args.json else _table(report, {}))
+        return 0
     if args.collision_only:
         report.update(collision_limit(args.repeats))
         print(json.dumps(report) if args.json else _table(report, {}))
@@ -521,6 +590,7 @@ def main(argv: list[str] | None = None) -> int:
     report.update(controller_ticks(states[20], targets[20], velocities[20]))
     report["mj_step_us_holding_brick"] = mj_step_us()
     report.update(planning_times())
+    report.update(cspace_planning_times(args.cells))
     report["physics_share_of_tick"] = report["tick_us_physics"] / report["tick_us_total"]
     report.update(compose_times())
 

@@ -13,6 +13,7 @@ import pytest
 
 from pickplace.cli import build_parser
 from pickplace.sim.checks import FAILURE_REASONS
+from pickplace.sim.parameters import PARAMETERS
 from pickplace.sim.scenarios import SCENARIOS, Scenario
 
 REPO = Path(__file__).resolve().parent.parent
@@ -162,6 +163,23 @@ def test_the_readme_and_the_scenarios_page_state_each_scenarios_outcome() -> Non
     for doc in ("README.md", "docs/scenarios.md"):
         text = (REPO / doc).read_text()
         assert outcome_problems(SCENARIOS.values(), table_rows(text, SCENARIOS)) == [], doc
+
+
+def test_every_varied_parameter_has_its_row_with_unit_and_range() -> None:
+    """docs/sweeps.md's table of varied parameters has a row per ``--vary`` name, with its
+    unit and its range (or grid) as the parameter states them."""
+    rows = {
+        m.group(1): m.group(0)
+        for m in re.finditer(
+            r"^\| `([a-z_]+)` \| ([^|]+) \| ([^|]+) \|.*$", (DOCS / "sweeps.md").read_text(), re.M
+        )
+    }
+    for name, p in PARAMETERS.items():
+        assert name in rows, f"docs/sweeps.md has no row for --vary {name}"
+        cells = [c.strip() for c in rows[name].split("|")[1:-1]]
+        assert cells[1] == p.unit, name
+        assert f"{p.low:g}" in cells[2] and f"{p.high:g}" in cells[2], name
+        assert ("grid" in cells[2]) == p.grid_only, name
 
 
 def test_every_failure_reason_is_documented() -> None:

@@ -133,7 +133,7 @@ def test_the_held_brick_is_checked_and_its_supports_are_not(scene: Scene) -> Non
     X_pick, X_place = _poses(scene, _bin1(scene, 0.0, 0.0, 0.0))
     assert planner.plan(X_pick, X_place).feasible
     pf = planner.preflight
-    kinds = pf._pair_kinds(X_pick, X_place)
+    kinds = pf.pair_kinds(X_pick, X_place)
     brick = scene.brick_geom_id
     for floor in ("bin1_floor", "bin2_floor"):
         assert kinds[brick, scene.model.geom(floor).id] == 0  # it rests there

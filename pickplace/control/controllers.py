@@ -174,6 +174,15 @@ class DiffIKController(ABC):
                     status = IKStatus.STUCK
         return IKResult(qdot=qdot, status=status, V_cmd=V_cmd, error=error, J_WG=J, x_WG=x_WG)
 
+    def follow_joints(self, q: np.ndarray | None, q_dot: np.ndarray | None = None) -> None:
+        """Where the joints should be besides the tool: a planned joint path's ``q`` [rad]
+        and ``q_dot`` [rad/s] (a C-space motion), or None for the home posture.
+
+        The base controllers have no posture term (their joint motion is the least-norm one
+        for the tool's), so this does nothing; the QP steers its null space with it.
+        """
+        del q, q_dot
+
     def observe_world(self, mocap_pos: np.ndarray, mocap_quat: np.ndarray) -> None:
         """Take the world's moving bodies' poses (every mocap body: an obstacle a fault moves)
         into the IK's own data, so that the next commands see them.
@@ -452,6 +461,22 @@ class QPController(DiffIKController):
         self._solve_qp: Callable[[np.ndarray], np.ndarray | None] = (
             self._solve_fast if backend == "fast" else self._solve_mink
         )
+
+    def follow_joints(self, q: np.ndarray | None, q_dot: np.ndarray | None = None) -> None:
+        """Aim the posture task at a planned joint path (``q`` [rad], ``q_dot`` [rad/s]), or
+        back at the home posture (``q`` None).
+
+        The posture task closes ``posture_gain`` of its error per tick in the frame task's
+        null space, so its target leads the path by ``q_dot · dt / posture_gain``: the null
+        space then moves at ``q_dot`` and closes the remaining error as before.
+        """
+        if q is None:
+            self.posture_task.set_target(self.scene.robot.q_home)
+            return
+        target = np.asarray(q, dtype=np.float64)
+        if q_dot is not None:
+            target = target + np.asarray(q_dot) * (self.dt / self.posture_task.gain)
+        self.posture_task.set_target(target)
 
     def set_frame_target(
         self, x_WG: np.ndarray | Sequence[float], V_cmd: np.ndarray | Sequence[float]

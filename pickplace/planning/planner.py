@@ -33,6 +33,15 @@ and the pre-flight runs from it.
 Every candidate's clearance via-point turns with the base swing (``via="swing"``, see
 :func:`pickplace.planning.plan.plan_pick_place`).
 
+When a candidate's path sweep collides in the transfer (after the lift, up to the pre-place),
+the transfer is planned again in joint space (:mod:`pickplace.planning.cspace`: RRT-Connect,
+shortcutting, a smooth spline, collision-checked by the pre-flight's own check at its
+clearance) from the IK's joint positions at the lift to those at the pre-place, both refined to
+the keyframes' poses exactly; the lift and the pre-place then stop, the via-point is dropped,
+and the plan is swept, timed by the robot's limits and pre-flighted again as a whole. Each
+candidate records which motion came from which planner (:class:`Motion`) and the report the
+time each planner took.
+
 A brick that the grip cannot hold even at rest within the timing's slip budget (too heavy,
 too little friction or grip force: :class:`~pickplace.planning.timing.GripTooWeakError`) is still
 planned, timed within the friction alone or else the robot's limits alone, with a warning on
@@ -43,28 +52,40 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
+import mujoco
 import numpy as np
 from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import PlanError
-from pickplace.geometry import require_pose
+from pickplace.geometry import pose_error_W_floats, require_pose
 from pickplace.planning.candidates import (
     GRAVITY,
     GraspCandidate,
     HandFootprint,
     box_grasps,
 )
+from pickplace.planning.cspace import (
+    CSpaceConfig,
+    CSpaceResult,
+    JointMotion,
+    lever_arms,
+    plan_joint_path,
+)
 from pickplace.planning.grasp import choose_place_pose, yaw_of
 from pickplace.planning.plan import (
+    Phases,
     Plan,
     PlanConfig,
+    Waypoint,
     for_gripper,
+    grasp_width,
     plan_pick_place,
     swung_pose,
+    time_keyframes,
 )
 from pickplace.planning.preflight import (
     Preflight,
@@ -74,6 +95,7 @@ from pickplace.planning.preflight import (
     start_configuration,
 )
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
+from pickplace.planning.trajectory import JointSegment, PoseTrajectory
 from pickplace.signals import stop_point
 from pickplace.world.scene import Scene
 
@@ -85,6 +107,14 @@ CLEARANCE_ABOVE_WALLS = 0.125
 PATH_SPACING = 0.02
 PATH_ANGLE = 0.1
 _RZ_PI = np.diag([-1.0, -1.0, 1.0])  # a half turn about z
+
+
+def _keyframe_at(times: list[float], t: float) -> int:
+    """Index of the keyframe at time ``t`` [s] (phases lie on keyframes)."""
+    i = min(range(len(times)), key=lambda j: abs(times[j] - t))
+    if abs(times[i] - t) > 1e-9:
+        raise PlanError(f"phase time {t!r} s is not a keyframe time")
+    return i
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
@@ -100,6 +130,59 @@ after those above it [rad]: the prediction counts the last joint alone, and the 
 measured the others sharing the turn, or the path overshooting it, by up to about 0.2 rad."""
 
 
+PLANNERS = ("cartesian", "c-space")
+"""Where a motion of a plan comes from: the Cartesian keyframes or the C-space planner."""
+
+
+@dataclass(frozen=True)
+class Motion:
+    """One motion of a plan between two keyframes, and the planner it came from.
+
+    Attributes:
+        start: The keyframe it starts at.
+        end: The keyframe it ends at.
+        planner: ``"cartesian"`` or ``"c-space"`` (:data:`PLANNERS`).
+    """
+
+    start: str
+    end: str
+    planner: str
+
+    def __post_init__(self) -> None:
+        """Validate the planner's name."""
+        if self.planner not in PLANNERS:
+            raise PlanError(f"motion planner must be one of {', '.join(PLANNERS)}")
+
+    def as_dict(self) -> dict[str, str]:
+        """JSON form."""
+        return {"from": self.start, "to": self.end, "planner": self.planner}
+
+
+@dataclass(frozen=True)
+class CSpaceAttempt:
+    """A candidate's transfer planned in C-space (because its Cartesian transfer collided).
+
+    Attributes:
+        cartesian_problem: The Cartesian transfer's collision.
+        result: What the C-space planning found (path, problem, time, checks).
+    """
+
+    cartesian_problem: Problem
+    result: CSpaceResult
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form, without the wall time: the Cartesian problem, whether a path was found,
+        the C-space problem, the collision checks and the path's vertices."""
+        r = self.result
+        return {
+            "cartesian_problem": self.cartesian_problem.as_dict(),
+            "found": r.path is not None,
+            "problem": r.problem,
+            "checks": r.checks,
+            "vertices": r.vertices,
+        }
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One plan tried, and what its pre-flight found.
@@ -110,24 +193,43 @@ class Candidate:
         preflight: Its pre-flight result.
         warning: What the timing could not honour (the slip budget of a brick too heavy for
             the grip), or None.
+        cspace: Its transfer planned in C-space, or None (every motion Cartesian).
     """
 
     label: str
     plan: Plan
     preflight: PreflightResult
     warning: str | None = None
+    cspace: CSpaceAttempt | None = None
+
+    def motions(self) -> list[Motion]:
+        """Each motion of the plan (between keyframes where the tool moves) and its planner."""
+        traj = self.plan.trajectory
+        out = []
+        for k, (a, b) in enumerate(zip(traj.keyframes, traj.keyframes[1:], strict=False)):
+            moves = float(np.linalg.norm(b.X_WG.translation() - a.X_WG.translation())) > 1e-9
+            if not moves and traj.joint_segments[k] is None:
+                continue
+            planner = "cartesian" if traj.joint_segments[k] is None else "c-space"
+            out.append(Motion(a.name, b.name, planner))
+        return out
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form: label, feasible, the first problem, how far the plan was checked and the
-        timing's warning."""
+        timing's warning; for a candidate whose transfer was planned in C-space also its
+        motions with their planners and the C-space attempt."""
         p = self.preflight
-        return {
+        out: dict[str, Any] = {
             "label": self.label,
             "feasible": p.feasible,
             "problem": None if p.problem is None else p.problem.as_dict(),
             "checked_until_s": p.t_checked,
             "warning": self.warning,
         }
+        if self.cspace is not None:
+            out["motions"] = [m.as_dict() for m in self.motions()]
+            out["c_space"] = self.cspace.as_dict()
+        return out
 
 
 @dataclass(frozen=True)
@@ -141,6 +243,8 @@ class PlanningReport:
         config: The pre-flight's rate and thresholds.
         ranked: How many grasp candidates were ranked by the cheap tests (``candidates`` holds
             the pre-flighted ones, or the best-ranked one when none passed the cheap tests).
+        planner_time_s: Wall time per planner [s]: ``"cartesian"`` (ranking, keyframes,
+            pre-flights and timing) and ``"c-space"`` (the C-space plannings).
     """
 
     candidates: tuple[Candidate, ...]
@@ -148,6 +252,12 @@ class PlanningReport:
     planning_time_s: float
     config: PreflightConfig
     ranked: int = 0
+    planner_time_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def used_cspace(self) -> bool:
+        """True if some candidate's transfer was planned in C-space."""
+        return any(c.cspace is not None for c in self.candidates)
 
     @property
     def feasible(self) -> bool:
@@ -282,6 +392,8 @@ class PickPlacePlanner:
             wide as its object width needs.
         preflight: Pre-flight rate and thresholds.
         timing: How plans are timed by the robot's limits.
+        seed: The run's seed: seeds the C-space planner's random numbers (with the attempt).
+        cspace: Budget and resolution of C-space planning.
     """
 
     def __init__(
@@ -291,8 +403,14 @@ class PickPlacePlanner:
         config: PlanConfig | None = None,
         preflight: PreflightConfig | None = None,
         timing: TimingConfig | None = None,
+        seed: int = 0,
+        cspace: CSpaceConfig | None = None,
     ) -> None:
         self.scene = scene
+        self.seed = int(seed)
+        self.cspace = cspace or CSpaceConfig()
+        self._cspace_time = 0.0
+        self._attempts = 0
         self.config = for_gripper(config or PlanConfig(), scene.robot.calibration)
         self.timing = timing or TimingConfig()
         self.preflight = Preflight(scene, controller, preflight)
@@ -358,6 +476,25 @@ class PickPlacePlanner:
         p_home = self.X_WG_home.translation() - robot.p_W_base
         self._home_azimuth = math.atan2(p_home[1], p_home[0])
         self._home_yaw = yaw_of(self.X_WG_home.rotation())
+        self._kin = kin
+        # The C-space metric: each joint's lever arm over the links after it, the hand and
+        # the brick (the farthest of their points from the tool).
+        self.lever_arms = lever_arms(kin, robot.q_home, self._hand_reach())
+
+    def _hand_reach(self) -> float:
+        """The farthest point of the hand (open) or the held brick from the tool [m]."""
+        m = self.preflight.model
+        d = mujoco.MjData(m)
+        robot = self.scene.robot
+        d.qpos[robot.arm_qpos_adr] = robot.q_home
+        d.qpos[self.scene.gripper_qpos_adr] = robot.qpos_for_width(self.config.open_width)
+        mujoco.mj_kinematics(m, d)
+        p_tool = d.site_xpos[robot.tool_site_id]
+        geoms = robot.gripper_geom_ids
+        hand = np.linalg.norm(d.geom_xpos[geoms] - p_tool, axis=1) + m.geom_rbound[geoms]
+        brick = float(np.linalg.norm(self.scene.brick_half_extents))
+        grasp = max(float(np.linalg.norm(p)) for p in self._p_OG)
+        return float(max(hand.max(), grasp + brick))
 
     def plan(
         self,
@@ -380,6 +517,7 @@ class PickPlacePlanner:
             PlanError: ``start.q`` is not one finite angle per arm joint.
         """
         t0 = time.perf_counter()
+        self._cspace_time, self._attempts = 0.0, 0
         if start is not None:
             start = Start(start_configuration(self.scene, start.q), start.X_WG)
         ranked = self.rank(X_WO_pick, X_WO_place, start)
@@ -389,8 +527,8 @@ class PickPlacePlanner:
             if r.problem is not None:
                 break
             stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
-            plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, r.grasp, start)
-            tried.append(Candidate(r.grasp.label, plan, result, warning))
+            plan, result, warning, attempt = self.planned(X_WO_pick, X_WO_place, r.grasp, start)
+            tried.append(Candidate(r.grasp.label, plan, result, warning, attempt))
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
                 if first_feasible:
@@ -399,8 +537,10 @@ class PickPlacePlanner:
             best = ranked[0]
             plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp, start=start)
             tried.append(Candidate(best.grasp.label, plan, self._refused(plan, best)))
+        total = time.perf_counter() - t0
+        times = {"cartesian": total - self._cspace_time, "c-space": self._cspace_time}
         return PlanningReport(
-            tuple(tried), chosen, time.perf_counter() - t0, self.preflight.config, len(ranked)
+            tuple(tried), chosen, total, self.preflight.config, len(ranked), times
         )
 
     def _refused(self, plan: Plan, ranked: Ranked) -> PreflightResult:
@@ -563,6 +703,166 @@ class PickPlacePlanner:
         timed, warning = self.retimed(path, swept.times, swept.q)
         result = self.preflight.run(timed, X_WO_pick, X_WO_place, q_start=q_start)
         return timed, result, warning
+
+    def planned(
+        self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate, start: Start | None = None
+    ) -> tuple[Plan, PreflightResult, str | None, CSpaceAttempt | None]:
+        """One candidate as :meth:`timed_plan` plans it (from ``start``, default home), and,
+        when its path sweep collides in the transfer, with the transfer planned in C-space
+        instead (:meth:`cspace_plan`).
+
+        Returns:
+            The plan, its pre-flight, the timing's warning and the C-space attempt (None when
+            the Cartesian plan was kept). When the C-space planning finds no path, the
+            Cartesian sweep with its collision, the C-space problem added to its text.
+        """
+        plan, result, warning = self.timed_plan(X_WO_pick, X_WO_place, grasp, start)
+        problem, phases = result.problem, plan.phases
+        if (
+            problem is None
+            or problem.kind != "collision"
+            or phases is None
+            or not phases.transport[0] < problem.t <= phases.transport[1]
+            or any(law is not None for law in plan.trajectory.laws)  # the timed plan's
+        ):
+            return plan, result, warning, None
+        return self.cspace_plan(X_WO_pick, X_WO_place, plan, result, start)
+
+    def cspace_plan(
+        self,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        path: Plan,
+        swept: PreflightResult,
+        start: Start | None = None,
+    ) -> tuple[Plan, PreflightResult, str | None, CSpaceAttempt]:
+        """The swept Cartesian ``path`` with its transfer (lift → pre-place) planned in
+        C-space, swept, timed and pre-flighted again (see the module docstring).
+
+        Args:
+            X_WO_pick: Brick pose to pick, in world.
+            X_WO_place: Goal pose of the brick.
+            path: The candidate's swept Cartesian plan, whose transfer collides.
+            swept: Its path sweep's pre-flight, with that collision.
+            start: Where the plan starts (default: home).
+        """
+        q_start = None if start is None else start.q
+        t0 = time.perf_counter()
+        problem = swept.problem
+        assert problem is not None
+        sc, dt = self.scene, self.preflight.dt
+        phases = path.phases
+        assert phases is not None and path.X_OG is not None  # a pick-and-place plan
+        keyframes = path.trajectory.keyframes
+        times = [k.t for k in keyframes]
+        i_lift, i_pre = (
+            _keyframe_at(times, phases.transport[0]),
+            _keyframe_at(times, phases.transport[1]),
+        )
+        # The IK's joint positions along the whole Cartesian path (through the collision: the
+        # IK does not see it), at the lift and the pre-place, refined to their poses.
+        full = self.preflight.run(
+            path, X_WO_pick, X_WO_place, stop_at_problem=False, q_start=q_start
+        )
+        q_lift = self._exact(full.q[round(times[i_lift] / dt)], keyframes[i_lift].X_WG)
+        q_pre = self._exact(full.q[round(times[i_pre] / dt)], keyframes[i_pre].X_WG)
+        X_GO = path.X_OG.inverse()
+        width = grasp_width(path, sc)
+        kinds = self.preflight.pair_kinds(X_WO_pick, X_WO_place)
+        kin = ArmKinematics(sc)
+
+        def check(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
+            kin.update(q)
+            return self.preflight.clearance(q, width, kin.X_WG() @ X_GO, kinds, True)
+
+        robot, margin = sc.robot, 2.0 * self.preflight.config.joint_margin
+        around = np.minimum(q_lift, q_pre) - math.pi, np.maximum(q_lift, q_pre) + math.pi
+        low = np.where(robot.continuous, around[0], robot.q_min + margin)
+        high = np.where(robot.continuous, around[1], robot.q_max - margin)
+        self._attempts += 1
+        result = plan_joint_path(
+            check,
+            q_lift,
+            q_pre,
+            low,
+            high,
+            self.lever_arms,
+            self.preflight.config.clearance + self.cspace.extra_clearance,
+            (self.seed * 7919 + self._attempts) & 0x7FFFFFFF,
+            self.cspace,
+        )
+        self._cspace_time += time.perf_counter() - t0
+        attempt = CSpaceAttempt(problem, result)
+        if result.path is None:
+            text = f"{problem.text}; {result.problem}"
+            return path, replace(swept, problem=replace(problem, text=text)), None, attempt
+        motion = JointMotion(result.path, ArmKinematics(sc))
+        swept_plan = self._with_joint_transfer(path, i_lift, i_pre, motion)
+        swept = self.preflight.run(swept_plan, X_WO_pick, X_WO_place, q_start=q_start)
+        if not swept.feasible:
+            return swept_plan, swept, None, attempt
+        timed, warning = self.retimed(swept_plan, swept.times, swept.q)
+        final = self.preflight.run(timed, X_WO_pick, X_WO_place, q_start=q_start)
+        return timed, final, warning, attempt
+
+    def _exact(self, q: np.ndarray, X_WG: SE3, iterations: int = 20) -> np.ndarray:
+        """``q`` moved (least-norm Gauss-Newton steps) until the tool is at ``X_WG`` [rad]."""
+        kin, target = self._kin, X_WG.wxyz_xyz.tolist()
+        q = np.array(q, dtype=np.float64)
+        for _ in range(iterations):
+            kin.update(q)
+            e = np.array(pose_error_W_floats(kin.wxyz_xyz_list(), target))
+            if float(np.abs(e).max()) < 1e-12:
+                break
+            q = q + np.linalg.lstsq(kin.J_WG(), e, rcond=None)[0]
+        return q
+
+    def _with_joint_transfer(
+        self, path: Plan, i_lift: int, i_pre: int, motion: JointMotion
+    ) -> Plan:
+        """The swept ``path`` with the keyframes between the lift and the pre-place dropped,
+        both stopping, and the segment between them moving along ``motion`` (its sweep a
+        pre-flight tick every :data:`PATH_SPACING` of the path's scaled L1 length, which
+        bounds every point's travel)."""
+        keyframes = path.trajectory.keyframes
+        dt = self.preflight.dt
+        ticks = max(2, math.ceil(motion.path.scaled_l1_length() / PATH_SPACING))
+        kept = [i for i in range(len(keyframes)) if not i_lift < i < i_pre]
+        waypoints = []
+        for i in kept:
+            k = keyframes[i]
+            ends = i in (i_lift, i_pre)
+            hold = max(k.hold, ticks * dt) if i == i_pre else k.hold
+            waypoints.append(
+                Waypoint(
+                    k.name,
+                    k.X_WG,
+                    k.gripper_width,
+                    hold,
+                    stop=k.stop or ends,
+                    curve=k.curve and i != i_pre,
+                )
+            )
+        new = time_keyframes(waypoints, self.sweep_config)
+        index = {old: j for j, old in enumerate(kept)}
+        old_times = [k.t for k in keyframes]
+
+        def moved(t: float) -> float:
+            return new[index[_keyframe_at(old_times, t)]].t
+
+        ph = path.phases
+        assert ph is not None
+        phases = Phases(
+            approach=(moved(ph.approach[0]), moved(ph.approach[1])),
+            grip_closed=moved(ph.grip_closed),
+            transport=(moved(ph.transport[0]), moved(ph.transport[1])),
+            place_reached=moved(ph.place_reached),
+            release=moved(ph.release),
+        )
+        joints: list[JointSegment | None] = [None] * (len(new) - 1)
+        joints[index[i_lift]] = motion
+        trajectory = PoseTrajectory(new, self.sweep_config.profile, joint_segments=joints)
+        return Plan(trajectory, phases, path.X_OG)
 
     def retimed(self, path: Plan, times: np.ndarray, q: np.ndarray) -> tuple[Plan, str | None]:
         """The swept path timed by the robot's limits and, while carrying, the slip budget.

@@ -34,6 +34,7 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace.control.controllers import (
+    DiffIKController,
     IKResult,
     IKStatus,
     make_controller,
@@ -41,6 +42,7 @@ from pickplace.control.controllers import (
 )
 from pickplace.errors import PlanError, require_positive
 from pickplace.planning.plan import Plan, grasp_width
+from pickplace.planning.trajectory import PoseTrajectory
 from pickplace.signals import stop_point
 from pickplace.world.scene import Scene
 
@@ -54,6 +56,9 @@ _SUPPORT_DISTANCE = 1e-3
 # The longest plan [s] a pre-flight takes: an hour of simulated time. A pre-flight keeps
 # (8 n + 2) numbers per tick for n joints (0.46 kB for 7), 72,000 ticks at 20 Hz: 33 MB.
 MAX_PLAN_DURATION_S = 3600.0
+# Within a C-space motion the controller runs at this rate between pre-flight ticks (the
+# loop's default control rate) [Hz].
+FINE_RATE_HZ = 100.0
 # A stop request is looked for every this many pre-flight ticks (a few ms of work).
 _STOP_POINT_TICKS = 16
 
@@ -207,6 +212,7 @@ class Preflight:
         self._gripper_qpos_adr = scene.gripper_qpos_adr
         self._width = math.nan  # the last width loaded, and its gripper joint positions
         self._gripper_qpos = scene.robot.qpos_for_width(0.0)
+        self._fine: DiffIKController | None = None  # made for the first C-space motion
 
     def run(
         self,
@@ -241,8 +247,11 @@ class Preflight:
         width_held = grasp_width(plan, sc)
         held = (phases.grip_closed, phases.release) if phases and X_GO is not None else None
         X_WO_end = X_WO_goal if X_WO_goal is not None else X_WO_start
-        pair_kind = self._pair_kinds(X_WO_start, X_WO_end)
+        pair_kind = self.pair_kinds(X_WO_start, X_WO_end)
         command, sample = self.controller.command, traj.sample
+        # A C-space motion's joint path steers the controller's null space (posture).
+        joints = traj.joint_sample if traj.has_joint_segments else None
+        following = False
         check_plan_duration(traj.end_time)
         n = math.floor(traj.end_time / dt + 1e-9) + 1
         times = np.arange(n) * dt
@@ -262,6 +271,11 @@ class Preflight:
             x, V, width = sample(t)
             if midpoint:  # the plan's velocity at the middle of the tick
                 V = sample(t + half_dt)[1]
+            if joints is not None:
+                js = joints(t + half_dt if midpoint else t)
+                if js is not None or following:
+                    self.controller.follow_joints(*(js if js is not None else (None, None)))
+                following = js is not None
             res = command(q, x, V)
             q_path[i], qdot_path[i], J_path[i] = q, res.qdot, res.J_WG
             is_held = held is not None and held[0] <= t < held[1]
@@ -276,7 +290,10 @@ class Preflight:
                 if found is not None and stop_at_problem:
                     end = i + 1
                     break
-            q = q + res.qdot * dt
+            # A C-space motion is integrated at the loop's rate within the tick.
+            q = self._fine_steps(q, t, traj) if following else q + res.qdot * dt
+        if following:
+            self.controller.follow_joints(None)
         problems = [
             p for p in (found, *self._path_problems(times, q_path, qdot_path, J_path, end)) if p
         ]
@@ -297,6 +314,27 @@ class Preflight:
             times=times[:end],
             q=q_all,
         )
+
+    def _fine_steps(self, q: np.ndarray, t: float, traj: PoseTrajectory) -> np.ndarray:
+        """``q`` after one pre-flight tick from ``t`` along a C-space motion, the controller
+        run at :data:`FINE_RATE_HZ` within it (midpoint feed-forward, the joint path followed):
+        a joint path turns the tool faster than the Cartesian paths the pre-flight's own rate
+        was measured on, and integrating it in 20 Hz steps lags by more than the loop does."""
+        fine = self._fine
+        if fine is None:
+            fine = self._fine = make_controller(
+                self.controller.name, self.scene, 1.0 / FINE_RATE_HZ
+            )
+        steps = max(1, round(self.dt * FINE_RATE_HZ))
+        h = self.dt / steps
+        for k in range(steps):
+            ts = t + k * h
+            js = traj.joint_sample(ts + 0.5 * h)
+            fine.follow_joints(*(js if js is not None else (None, None)))
+            x = traj.sample(ts)[0]
+            V = traj.sample(ts + 0.5 * h)[1]
+            q = q + fine.command(q, x, V).qdot * h
+        return q
 
     def _tick_problem(
         self,
@@ -415,7 +453,7 @@ class Preflight:
         mujoco.mj_kinematics(m, d)
         mujoco.mj_collision(m, d)
 
-    def _pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
+    def pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
         """Per geom pair: 1 robot-world, 2 brick-world (not a geom it rests against at the
         start or the end: within the clearance of it there), 0 not checked; shape
         (ngeom, ngeom), symmetric."""
@@ -436,6 +474,22 @@ class Preflight:
                 if brick in (a, b):
                     kinds[a, b] = kinds[b, a] = 0  # the brick rests against it
         return kinds
+
+    def clearance(
+        self, q: np.ndarray, width: float, X_WO: SE3, pair_kind: np.ndarray, held: bool
+    ) -> tuple[float, tuple[str, str, tuple[float, float, float]] | None]:
+        """The pre-flight's collision check at one configuration: the smallest robot-world
+        (and, if ``held``, brick-world) distance [m], capped at the detection distance, with
+        its pair of geom names and point in world [m] (None when nothing is that near).
+
+        Args:
+            q: Arm joint positions [rad].
+            width: The fingers' gap [m].
+            X_WO: The brick's pose in world.
+            pair_kind: Which pairs count (:meth:`pair_kinds`).
+            held: Whether the brick is held (its pairs count too).
+        """
+        return self._closest(q, width, X_WO, pair_kind, held)
 
     def _closest(
         self, q: np.ndarray, width: float, X_WO: SE3, pair_kind: np.ndarray, held: bool

@@ -453,7 +453,8 @@ def retime(
     limits: Callable[[bool], SegmentLimits],
 ) -> Plan:
     """The plan's path, timed by the robot: each motion time-optimally along the joint path
-    the pre-flight found, each in-place segment (a gripper action) for its keyframe's hold.
+    the pre-flight found (along its own joint path, for a segment that moves in joint space),
+    each in-place segment (a gripper action) for its keyframe's hold.
 
     A motion runs from one stop to the next: consecutive moving segments joined at keyframes
     the tool passes through are timed as one path (the path parameter is the segments' chord
@@ -475,6 +476,7 @@ def retime(
     """
     keyframes = path_plan.trajectory.keyframes
     sample = path_plan.trajectory.sample
+    joint_segments = path_plan.trajectory.joint_segments
     n_seg = len(keyframes) - 1
     if len(times) < 2:
         raise PlanError("the pre-flight's joint path has fewer than 2 ticks")
@@ -512,11 +514,20 @@ def retime(
             bounds.append(bounds[-1] + n)
         k0, k1 = ticks[i], ticks[j + 1]
         poses = np.array([sample(float(times[k]))[0] for k in range(k0, k1 + 1)])
+        q_motion = q[k0 : k1 + 1]
+        for m in range(i, j + 1):
+            js = joint_segments[m]
+            if js is not None:  # its own joint path, at the sweep's u = (k − k_m) / n
+                if q_motion is q[k0 : k1 + 1]:
+                    q_motion = q_motion.copy()
+                n = bounds[m - i + 1] - bounds[m - i]
+                for step in range(n + 1):
+                    q_motion[bounds[m - i] + step] = js.sample(step / n, 0.0)[2]
         carried = (
             carry is not None and carry[0] <= keyframes[i].t and keyframes[j + 1].t <= carry[1]
         )
         profile = time_optimal_profile(
-            q[k0 : k1 + 1], grid, poses[:, 4:], _accumulated_rotation(poses[:, :4]), limits(carried)
+            q_motion, grid, poses[:, 4:], _accumulated_rotation(poses[:, :4]), limits(carried)
         )
         for m in range(i, j + 1):
             law = profile.law(bounds[m - i], bounds[m - i + 1])
@@ -541,7 +552,9 @@ def retime(
             place_reached=moved(phases.place_reached),
             release=moved(phases.release),
         )
-    trajectory = PoseTrajectory(retimed, path_plan.trajectory.profile, laws)
+    trajectory = PoseTrajectory(
+        retimed, path_plan.trajectory.profile, laws, path_plan.trajectory.joint_segments
+    )
     return Plan(trajectory, new_phases, path_plan.X_OG)
 
 

@@ -368,10 +368,24 @@ class TimeLaw(Protocol):
         """(u [-], u̇ [1/s]) at local time ``t`` [s] from the segment's start."""
 
 
+class JointSegment(Protocol):
+    """A segment moved in joint space: the joint path q(u), u ∈ [0, 1], and the tool pose
+    and spatial velocity it gives by forward kinematics (e.g.
+    :class:`pickplace.planning.cspace.JointMotion`)."""
+
+    def sample(
+        self, u: float, u_dot: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """(x_WG wxyz_xyz, V_WG = J q'(u) u̇ [m/s, rad/s], q [rad], q̇ [rad/s]) at ``u``."""
+
+
 class PoseTrajectory:
     """Gripper pose ``X_WG(t)``, spatial velocity and gripper width through keyframes.
 
     Times before the first keyframe or after the last one clamp to the ends (velocity zero).
+    A segment may move in joint space (a :class:`JointSegment`, planned in C-space): its pose
+    and velocity are the forward kinematics of its joint path, q(u(t)), and its joint path
+    itself is given to the controller (:meth:`joint_sample`).
     """
 
     def __init__(
@@ -379,6 +393,7 @@ class PoseTrajectory:
         keyframes: Sequence[Keyframe],
         profile: MotionProfile | str = "sine",
         laws: Sequence[TimeLaw | None] | None = None,
+        joint_segments: Sequence[JointSegment | None] | None = None,
     ) -> None:
         """Build the trajectory and precompute per-segment data.
 
@@ -387,9 +402,13 @@ class PoseTrajectory:
             profile: Motion profile of the segments without a law, or its name (``PROFILES``).
             laws: Per segment, a time law that replaces the profile (its duration must be the
                 segment's), or None for the profile.
+            joint_segments: Per segment, a joint path it moves along instead of the Cartesian
+                line or curve between its keyframes (whose poses must be the path's ends), or
+                None; both keyframes of such a segment must stop.
 
         Raises:
-            PlanError: Invalid keyframes, or laws that do not match the segments.
+            PlanError: Invalid keyframes, or laws or joint segments that do not match the
+                segments.
             UnknownNameError: Unknown profile name.
         """
         validate_keyframes(keyframes)
@@ -406,6 +425,21 @@ class PoseTrajectory:
             if law is not None and abs(law.duration - span) > 1e-9 * max(1.0, span):
                 raise PlanError(
                     f"segment {i}'s time law lasts {law.duration!r} s, the segment {span!r} s"
+                )
+        self._joint: tuple[JointSegment | None, ...] = (
+            tuple(joint_segments) if joint_segments else (None,) * n_segments
+        )
+        if len(self._joint) != n_segments:
+            raise PlanError(
+                f"joint_segments must have one entry per segment ({n_segments}), got "
+                f"{len(self._joint)}"
+            )
+        for i, js in enumerate(self._joint):
+            a, b = self._keyframes[i], self._keyframes[i + 1]
+            if js is not None and not (a.stop and b.stop):
+                raise PlanError(
+                    f"segment '{a.name}' -> '{b.name}' moves in joint space: both its keyframes "
+                    "must stop"
                 )
         self._times = [float(k.t) for k in keyframes]
         self._segments: list[_Segment] = []
@@ -441,6 +475,37 @@ class PoseTrajectory:
     def laws(self) -> tuple[TimeLaw | None, ...]:
         """Per segment, its time law (None: the profile)."""
         return self._laws
+
+    @property
+    def joint_segments(self) -> tuple[JointSegment | None, ...]:
+        """Per segment, the joint path it moves along (None: Cartesian)."""
+        return self._joint
+
+    @property
+    def has_joint_segments(self) -> bool:
+        """True if a segment moves in joint space."""
+        return any(js is not None for js in self._joint)
+
+    def joint_sample(self, t: float) -> tuple[FloatArray, FloatArray] | None:
+        """The joint path's (q [rad], q̇ [rad/s]) at time ``t`` [s] inside a joint-space
+        segment, or None elsewhere (a knot time belongs to the segment that starts there)."""
+        i = bisect.bisect_right(self._times, t) - 1
+        if i < 0 or i >= len(self._segments):
+            return None
+        js = self._joint[i]
+        if js is None:
+            return None
+        seg = self._segments[i]
+        u, u_dot = self._progress(seg, t)
+        _, _, q, q_dot = js.sample(u, u_dot)
+        return q, q_dot
+
+    def _progress(self, seg: _Segment, t: float) -> tuple[float, float]:
+        """(s, ṡ [1/s]) of segment ``seg`` at time ``t`` (its law or the profile)."""
+        if seg.law is not None:
+            return seg.law(t - seg.t0)
+        tau = min(max((t - seg.t0) * seg.inv_duration, 0.0), 1.0)
+        return self._profile.s(tau), self._profile.ds(tau) * seg.inv_duration
 
     @property
     def profile(self) -> MotionProfile:
@@ -531,13 +596,18 @@ class PoseTrajectory:
         """
         times = self._times
         segments = self._segments
-        i = bisect.bisect_right(times, t) - 1
-        seg = segments[min(max(i, 0), len(segments) - 1)]
+        i = min(max(bisect.bisect_right(times, t) - 1, 0), len(segments) - 1)
+        seg = segments[i]
         tau = min(max((t - seg.t0) * seg.inv_duration, 0.0), 1.0)
         width = seg.width0 + tau * seg.dwidth
         if t >= times[-1]:
             x_WG = np.array(self._keyframes[-1].X_WG.wxyz_xyz, dtype=np.float64)
             return x_WG, np.zeros(6, dtype=np.float64), width
+        js = self._joint[i]
+        if js is not None and t > times[0]:
+            u, u_dot = self._progress(seg, t)
+            x_WG, V_WG, _, _ = js.sample(u, u_dot)
+            return x_WG, V_WG, width
         law = seg.law
         if law is None:
             s = self._profile.s(tau)

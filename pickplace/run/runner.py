@@ -37,7 +37,7 @@ from pickplace.sim.loop import SimConfig, Simulation, TickObserver
 from pickplace.sim.recovery import check_attempts
 from pickplace.sim.scenarios import BuildRequest, Scenario, get_scenario
 from pickplace.sim.task import Task
-from pickplace.sim.variation import apply_to_scene, apply_to_task
+from pickplace.sim.variation import apply_to_task, apply_world
 from pickplace.sim.vary import ParameterDraw
 from pickplace.sim.verdict import RunResult
 from pickplace.world.placements import BrickPlacement, check_brick_in_source_bin
@@ -448,8 +448,10 @@ def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, T
     """The scene and the scenario's task of a resolved request; see :func:`build_task`."""
     req, scenario = run.request, run.scenario
     scene = load_scene(run.world, run.robot)
-    if req.parameters is not None:  # before planning: the planner must know the brick
-        scene = apply_to_scene(scene, req.parameters)
+    # Before planning: the planner must know the obstacles and the brick.
+    cell = scenario.world(scene, req.seed) if scenario.world is not None else None
+    if req.parameters is not None or cell is not None:
+        scene = apply_world(scene, req.parameters, cell)
     if req.brick is not None:
         check_brick_in_source_bin(scene, req.brick)
     task = scenario.build(

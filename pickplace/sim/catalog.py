@@ -55,6 +55,14 @@ CATALOG: dict[str, ScenarioInfo] = {
             random=True,
         ),
         ScenarioInfo(
+            "pick-place-obstacles",
+            "nominal pick and place in a cell drawn from the seed: a divider wall between the "
+            "bins of random height, maybe a shelf over bin 2, a few random boxes (success "
+            "where a plan is feasible, around them in C-space where the Cartesian one "
+            "collides; else no-feasible-plan, naming what blocks)",
+            random=True,
+        ),
+        ScenarioInfo(
             "singular-reach",
             "tool pulled along a straight line past full arm stretch "
             "and back (qp stays within limits, pinv does not)",

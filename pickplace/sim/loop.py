@@ -216,6 +216,7 @@ class Simulation:
         self._plan_replaced = False  # in the block being assessed
         self._sample = task.plan.trajectory.sample
         self._command = controller.command
+        self._following = False  # the controller follows a C-space motion's joint path
         self._set_width = controller.set_gripper_width
         # The IK sees the fingers at the commanded gap, never narrower than the grasped brick
         # (closed on it they stop there), as the pre-flight does.
@@ -501,9 +502,17 @@ class Simulation:
         set_width, width_held = self._set_width, self._width_held
         q_cmd = self.q_cmd
         qdot_prev = log.qdot_cmd[k0 - 1] if k0 > 0 else self._zero_qdot
+        trajectory = self._plan.trajectory
+        # A C-space motion's joint path steers the controller's null space (posture).
+        joints = trajectory.joint_sample if trajectory.has_joint_segments else None
         for k in range(k0, k1):
             t = k * dt - t_start  # the plan's clock
             x_plan, V_plan, width = sample(t)
+            if joints is not None:
+                js = joints(t)
+                if js is not None or self._following:
+                    self.controller.follow_joints(*(js if js is not None else (None, None)))
+                self._following = js is not None
             t0 = time.perf_counter_ns()
             set_width(width if width > width_held else width_held)
             res = command(q_cmd, x_plan, V_plan)

@@ -31,6 +31,8 @@ from pickplace.sim.catalog import CATALOG, ScenarioInfo
 from pickplace.sim.goals import PlaceGoal, ReachGoal
 from pickplace.sim.recovery import Reattempt
 from pickplace.sim.task import Fault, Task
+from pickplace.world.cell import ObstacleCell
+from pickplace.world.obstacles import draw_boxes
 from pickplace.world.placements import (
     BrickPlacement,
     brick_on_floor,
@@ -75,7 +77,7 @@ class BuildRequest:
 
     def planner(self) -> PickPlacePlanner:
         """A planner for this request's scene, controller and timing."""
-        return PickPlacePlanner(self.scene, self.controller, timing=self.timing)
+        return PickPlacePlanner(self.scene, self.controller, timing=self.timing, seed=self.seed)
 
 
 def pick_place_task(
@@ -212,6 +214,8 @@ def singular_reach_task(req: BuildRequest, plan: PlanConfig | None = None) -> Ta
 
 
 Builder = Callable[[BuildRequest], Task]
+WorldBuilder = Callable[[Scene, int], ObstacleCell]
+"""The obstacle cell of a scenario's world, from the loaded scene and the run's seed."""
 
 
 @dataclass(frozen=True)
@@ -221,9 +225,35 @@ class Scenario(ScenarioInfo):
 
     Attributes:
         build: Builds the task (see :class:`BuildRequest`).
+        world: The obstacle cell the scenario adds to the world before planning (the runner
+            adds it, :func:`pickplace.sim.variation.apply_world`), or None.
     """
 
     build: Builder = field(kw_only=True)
+    world: WorldBuilder | None = field(default=None, kw_only=True)
+
+
+# pick-place-obstacles: the divider's height [m], the chance of a shelf and its height [m],
+# the most boxes; drawn from their own stream of the seed ("cell" in ASCII).
+CELL_DIVIDER_HEIGHT = (0.22, 0.28)
+CELL_SHELF_CHANCE = 0.5
+CELL_SHELF_HEIGHT = (0.8, 0.95)
+CELL_MAX_BOXES = 3
+_CELL_STREAM = 0x63656C6C
+
+
+def obstacle_cell(scene: Scene, seed: int) -> ObstacleCell:
+    """``pick-place-obstacles``' cell for ``seed``: a divider of height uniform in
+    :data:`CELL_DIVIDER_HEIGHT`, with chance :data:`CELL_SHELF_CHANCE` a shelf at a height
+    uniform in :data:`CELL_SHELF_HEIGHT`, and 0 to :data:`CELL_MAX_BOXES` boxes
+    (:func:`~pickplace.world.obstacles.draw_boxes`), all from the seed's own stream."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_CELL_STREAM,)))
+    divider = float(rng.uniform(*CELL_DIVIDER_HEIGHT))
+    shelf = float(rng.uniform(*CELL_SHELF_HEIGHT))
+    if rng.uniform() >= CELL_SHELF_CHANCE:
+        shelf = 0.0
+    count = int(rng.integers(0, CELL_MAX_BOXES + 1))
+    return ObstacleCell(divider, shelf, draw_boxes(scene, rng, count))
 
 
 def _nominal(req: BuildRequest) -> Task:
@@ -286,6 +316,7 @@ BUILDERS: dict[str, Builder] = {
     "pick-place": _nominal,
     "pick-place-random": _random,
     "pick-place-uniform": _uniform,
+    "pick-place-obstacles": _nominal,
     "singular-reach": _reach,
     "fault-gripper-disabled": _with_fault(faults.GripperDisabled),
     "fault-brick-moved": _with_fault(faults.BrickMoved),
@@ -296,9 +327,14 @@ BUILDERS: dict[str, Builder] = {
     "fault-obstacle": _with_fault(faults.Obstacle),
 }
 
+# The obstacle cell of each scenario that brings one, by name.
+WORLDS: dict[str, WorldBuilder] = {"pick-place-obstacles": obstacle_cell}
+
 SCENARIOS: dict[str, Scenario] = {
     name: Scenario(
-        **{f.name: getattr(info, f.name) for f in fields(ScenarioInfo)}, build=BUILDERS[name]
+        **{f.name: getattr(info, f.name) for f in fields(ScenarioInfo)},
+        build=BUILDERS[name],
+        world=WORLDS.get(name),
     )
     for name, info in CATALOG.items()
 }

@@ -27,7 +27,16 @@ parameter          what changes
 ``pose_noise``     a :class:`~pickplace.sim.faults.BrickShifted` fault: after planning the brick
                    lies the drawn planar offset away, kept (each coordinate in bin 1's frame)
                    so that its footprint stays inside bin 1's inner walls
+``divider_height`` the obstacle cell's divider wall between the bins
+                   (:mod:`pickplace.world.obstacles`), added with ``MjSpec`` before planning
+``shelf_height``   the cell's shelf over bin 2, likewise
+``obstacle_boxes`` the cell's random boxes: this many, drawn by
+                   :func:`~pickplace.world.obstacles.draw_boxes` from the parameter's own
+                   stream (:func:`~pickplace.sim.vary.parameter_stream`)
 =================  ==========================================================================
+
+A scenario may bring an obstacle cell of its own (``pick-place-obstacles``); a varied obstacle
+parameter takes the place of the cell's (:func:`apply_world`).
 
 Model edits are followed by ``mj_setConst`` (derived constants such as subtree masses), on a
 copy of the model: the scene given is left as it was.
@@ -45,11 +54,47 @@ from mink.lie import SE3
 
 from pickplace.sim.faults import BrickShifted
 from pickplace.sim.task import Task
-from pickplace.sim.vary import ParameterDraw
+from pickplace.sim.vary import ParameterDraw, parameter_stream
+from pickplace.world.cell import ObstacleCell
+from pickplace.world.obstacles import draw_boxes, with_obstacles
 from pickplace.world.scene import Scene
 
 # Parameters that change the scene (the others: the task, or the run request's own fields).
 SCENE_PARAMETERS = ("brick_mass", "brick_size", "friction", "grip_force")
+# Parameters that add obstacles to the world.
+WORLD_PARAMETERS = ("divider_height", "shelf_height", "obstacle_boxes")
+
+
+def obstacle_cell(
+    scene: Scene, draw: ParameterDraw | None, cell: ObstacleCell | None = None
+) -> ObstacleCell | None:
+    """The obstacle cell of a run: the scenario's ``cell`` (or none) with every obstacle
+    parameter the draw varies in its place; None when there is neither."""
+    values = {} if draw is None else {k: v for k, v in draw.values.items() if k in WORLD_PARAMETERS}
+    if not values:
+        return cell
+    cell = cell or ObstacleCell()
+    if "divider_height" in values:
+        cell = dataclasses.replace(cell, divider_height=values["divider_height"])
+    if "shelf_height" in values:
+        cell = dataclasses.replace(cell, shelf_height=values["shelf_height"])
+    if "obstacle_boxes" in values and draw is not None:
+        rng = parameter_stream(draw.seed, "obstacle_boxes")
+        cell = dataclasses.replace(
+            cell, boxes=draw_boxes(scene, rng, int(values["obstacle_boxes"]))
+        )
+    return cell
+
+
+def apply_world(
+    scene: Scene, draw: ParameterDraw | None, cell: ObstacleCell | None = None
+) -> Scene:
+    """The run's world before planning: the obstacles (:func:`obstacle_cell`) added with
+    ``MjSpec``, then the scene parameters applied (:func:`apply_to_scene`) to the new model."""
+    obstacles = obstacle_cell(scene, draw, cell)
+    if obstacles is not None:
+        scene = with_obstacles(scene, obstacles)
+    return scene if draw is None else apply_to_scene(scene, draw)
 
 
 def apply_to_scene(scene: Scene, draw: ParameterDraw) -> Scene:
@@ -155,7 +200,10 @@ def apply_to_task(scene: Scene, task: Task, draw: ParameterDraw) -> Task:
 
 __all__ = [
     "SCENE_PARAMETERS",
+    "WORLD_PARAMETERS",
     "apply_to_scene",
     "apply_to_task",
+    "apply_world",
     "brick_offset_W",
+    "obstacle_cell",
 ]

@@ -24,6 +24,11 @@ name              unit   valid            meaning
                                           rate, e.g. 100, 125, 250, 500 Hz at 2 ms steps)
 ``attempts``      -      1 … 10           most attempts of a run (``--attempts``); grid of
                                           whole numbers only
+``divider_height`` m     [0, 0.6]         a divider wall between the bins this high (0: none)
+``shelf_height``  m      [0, 1.2]         a shelf over bin 2, its underside this high (0: none)
+``obstacle_boxes`` -     {0, 1, …, 6}     this many boxes standing at random in the workspace;
+                                          grid only; their sizes and places come from the
+                                          parameter's own stream
 ================  =====  ===============  ====================================================
 
 How values are drawn for the trial with seed ``s``:

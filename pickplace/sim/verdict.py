@@ -287,6 +287,8 @@ class RunResult:
         planning = self.planning
         out["planning_time_s"] = None if planning is None else planning.planning_time_s
         out["plan"] = None if planning is None else planning.as_dict()
+        if planning is not None and planning.used_cspace:  # only when C-space was planned
+            out["planner_time_s"] = dict(planning.planner_time_s)
         out["events"] = [
             {"tick": e.tick, "t": e.t, "level": e.level, "kind": e.kind.value, "text": e.text}
             for e in self.events
@@ -307,4 +309,5 @@ WALL_TIME_FIELDS: tuple[str, ...] = (
     "realtime_factor",
     "ik_tick_us_median",
     "planning_time_s",
+    "planner_time_s",
 )

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -26,6 +27,9 @@ from pickplace.robot.mjcf import file_stamps, parse_world
 from pickplace.robot.model import Composition, Robot
 from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from pickplace.robot.registry import DEFAULT_WORLD
+
+if TYPE_CHECKING:
+    from pickplace.world.cell import ObstacleCell
 
 __all__ = [
     "BRICK_MASS_RANGE",
@@ -241,6 +245,11 @@ class Scene:
         robot_world_sensor_adr: sensordata addresses of the robot-world contact sensors, one
             per robot root and world contact body, each [found, f_normal, f_t1, f_t2] of the
             contact with the largest force (force on the robot in the contact frame [N]).
+        spec: The composed spec the model was compiled from, without the robot-world
+            sensors (:func:`pickplace.world.obstacles.with_obstacles` adds to a copy of it);
+            never changed.
+        obstacles: The obstacles added to the world
+            (:class:`~pickplace.world.cell.ObstacleCell`), or None.
     """
 
     model: mujoco.MjModel
@@ -263,6 +272,8 @@ class Scene:
     robot_body_mask: np.ndarray = field(repr=False)
     world_contact_body_ids: np.ndarray
     robot_world_sensor_adr: np.ndarray
+    spec: mujoco.MjSpec | None = field(default=None, repr=False, compare=False)
+    obstacles: ObstacleCell | None = None
 
     def pad_sensor_rows(self, sensordata: np.ndarray) -> np.ndarray:
         """The pad sensors' contact slots from sensordata of shape (..., nsensordata).
@@ -495,7 +506,12 @@ def _add_robot_world_sensors(
     return names
 
 
-def build_scene(composition: Composition, path: Path, names: WorldNames | None = None) -> Scene:
+def build_scene(
+    composition: Composition,
+    path: Path,
+    names: WorldNames | None = None,
+    arm_model: mujoco.MjModel | None = None,
+) -> Scene:
     """Resolve a composed scene: the world's names, the robot, the robot–world sensors.
 
     Args:
@@ -504,6 +520,8 @@ def build_scene(composition: Composition, path: Path, names: WorldNames | None =
             its spec is copied, not changed.
         path: The world file (reported in the scene).
         names: World names to resolve; default :class:`WorldNames`.
+        arm_model: The arm-only model of the IK when it is known already (the same robot in
+            a world with more obstacles); default: the composition's.
 
     Raises:
         SceneError: The brick or a bin is structurally wrong, or the scene does not compile.
@@ -546,7 +564,7 @@ def build_scene(composition: Composition, path: Path, names: WorldNames | None =
         path=path,
         robot=robot,
         names=names,
-        arm_model=composition.arm_model,
+        arm_model=composition.arm_model if arm_model is None else arm_model,
         gripper_qpos_adr=model.jnt_qposadr[robot.gripper_joint_ids].copy(),
         pad_force_sensor_adr=pad_adr,
         pad_sensor_side=pad_side,
@@ -562,4 +580,5 @@ def build_scene(composition: Composition, path: Path, names: WorldNames | None =
         robot_body_mask=mask,
         world_contact_body_ids=np.array(world_bodies, dtype=int),
         robot_world_sensor_adr=world_sensor_adr,
+        spec=composition.spec,
     )
