@@ -228,7 +228,7 @@ def test_no_path_within_the_budget_names_what_refused_most() -> None:
             return -0.01, ("toy/link", "wall", (0.0, 0.0, 0.0))
         return 1.0, None
 
-    config = CSpaceConfig(budget_s=0.05)
+    config = CSpaceConfig(max_checks=500)
     result = plan_joint_path(
         boxed,
         np.zeros(2),
@@ -241,8 +241,26 @@ def test_no_path_within_the_budget_names_what_refused_most() -> None:
         config,
     )
     assert result.path is None and result.problem is not None
-    assert "within 0.05 s" in result.problem and "wall" in result.problem
-    assert result.time_s < 1.0
+    assert "within 500 collision checks" in result.problem and "wall" in result.problem
+    assert result.checks <= 500 + 1  # the budget is counted, not timed: the same everywhere
+
+
+def test_the_wall_time_bound_also_ends_a_planning() -> None:
+    def boxed(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
+        return (-0.01, ("a", "wall", (0.0, 0.0, 0.0))) if 0.45 <= q[0] <= 0.55 else (1.0, None)
+
+    result = plan_joint_path(
+        boxed,
+        np.zeros(2),
+        np.array([1.0, 0.0]),
+        -np.ones(2),
+        2 * np.ones(2),
+        np.ones(2),
+        0.0,
+        4,
+        CSpaceConfig(max_checks=10**9, budget_s=0.05),
+    )
+    assert result.path is None and result.time_s < 1.0
 
 
 def test_a_stop_request_ends_the_planning(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -277,6 +295,8 @@ def test_the_config_is_validated() -> None:
         CSpaceConfig(budget_s=0.0)
     with pytest.raises(Exception, match="max_refinements"):
         CSpaceConfig(max_refinements=-1)
+    with pytest.raises(Exception, match="max_checks"):
+        CSpaceConfig(max_checks=0)
 
 
 def test_a_run_over_the_divider_follows_the_joint_path_and_touches_nothing() -> None:

@@ -23,9 +23,12 @@ point of the robot or the brick moves farther than that between two checks, and 
 twice the clearance cannot cross a wall without one check inside its clearance.
 
 OMPL's random numbers come from its global seed, set from the run's seed before each planning
-(``ompl.util.RNG.setSeed``): a planning that ends within its time budget gives the same path in
-every process. :attr:`CSpaceConfig.budget_s` bounds the wall time; a stop request
-(:func:`pickplace.signals.stop_point`) ends it at the next check.
+(``ompl.util.RNG.setSeed``), and its budget is a number of collision checks
+(:attr:`CSpaceConfig.max_checks`), not time: the same seed gives the same path, or the same
+refusal, in every process and on a busy or idle machine alike. :attr:`CSpaceConfig.budget_s`
+is only a bound on the wall time, ten times what the check budget takes here, that a machine
+far slower than this one could reach; a stop request (:func:`pickplace.signals.stop_point`)
+ends a planning at the next check.
 """
 
 from __future__ import annotations
@@ -54,9 +57,13 @@ class CSpaceConfig:
     """Budget and resolution of C-space planning.
 
     Attributes:
-        budget_s: Largest wall time of one planning, RRT-Connect and simplification
-            together [s]; past it the planning fails (a deterministic path is one found
-            within it).
+        max_checks: Most collision checks of one planning, RRT-Connect, simplification and
+            the spline's refinement together: its budget, deterministic. A path for the
+            bundled robots' obstacle cells takes about 11,000 checks (0.3 s at the 29 µs a
+            check measured with ``scripts/bench.py``); 60,000 take about 1.7 s.
+        budget_s: Bound on the wall time of one planning [s]: ten times what the check budget
+            takes on this machine's kind, so it binds only on a far slower machine (then the
+            refusal depends on that machine's speed).
         check_step: Largest scaled L1 length Σ w_j |Δq_j| between two collision checks of a
             motion [m]: no robot point moves farther between them.
         planner_range: RRT-Connect's longest edge, in the scaled joint space [m].
@@ -68,7 +75,8 @@ class CSpaceConfig:
             the whole plan judges at its own clearance.
     """
 
-    budget_s: float = 2.0
+    max_checks: int = 60_000
+    budget_s: float = 20.0
     check_step: float = 0.01
     planner_range: float = 0.5
     max_refinements: int = 12
@@ -79,12 +87,10 @@ class CSpaceConfig:
         for name in ("budget_s", "check_step", "planner_range"):
             require_positive(f"c-space {name}", getattr(self, name))
         require_non_negative("c-space extra_clearance", self.extra_clearance, PlanError)
-        if isinstance(self.max_refinements, bool) or not (
-            isinstance(self.max_refinements, int) and self.max_refinements >= 0
-        ):
-            raise PlanError(
-                f"c-space max_refinements must be an integer >= 0, got {self.max_refinements!r}"
-            )
+        for name, least in (("max_refinements", 0), ("max_checks", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, int) and value >= least):
+                raise PlanError(f"c-space {name} must be an integer >= {least}, got {value!r}")
 
 
 class ClearanceCheck(Protocol):
@@ -306,7 +312,7 @@ def plan_joint_path(
             )
 
     def expired() -> bool:
-        return bool(caught) or time.perf_counter() > deadline
+        return bool(caught) or counts["checks"] >= cfg.max_checks or time.perf_counter() > deadline
 
     def valid(q: np.ndarray) -> bool:
         if caught:
@@ -329,8 +335,8 @@ def plan_joint_path(
         worst = max(blockers.items(), key=lambda kv: kv[1])[0] if blockers else ("?", "?")
         return CSpaceResult(
             None,
-            f"no c-space path from the lift to the pre-place within {cfg.budget_s:g} s "
-            f"({counts['checks']} checks; most refused: {worst[0]} within "
+            f"no c-space path from the lift to the pre-place within {cfg.max_checks} "
+            f"collision checks ({counts['checks']} made; most refused: {worst[0]} within "
             f"{clearance * 1000:.0f} mm of {worst[1]})",
             time.perf_counter() - t0,
             counts["checks"],
@@ -349,7 +355,7 @@ def plan_joint_path(
         return CSpaceResult(
             None,
             "the c-space path could not be smoothed within the free space "
-            f"({cfg.max_refinements} refinements, {cfg.budget_s:g} s)",
+            f"({cfg.max_refinements} refinements, {cfg.max_checks} checks)",
             elapsed,
             counts["checks"],
             len(vertices),
