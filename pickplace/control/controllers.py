@@ -115,6 +115,11 @@ class DiffIKController(ABC):
 
     name: ClassVar[str]
 
+    collision_held: bool = False
+    """Whether the last tick's step met a row of the controller's collision limit (to 1e-9
+    m): the limit, not the plan, decided how far the robot moved toward the world. Always
+    False for a controller without one (``pinv``, ``dls``, ``qp-no-collision``)."""
+
     def __init__(
         self,
         scene: Scene,
@@ -707,7 +712,8 @@ class QPController(DiffIKController):
                 status = IKStatus.LIMITED
         h = self._h_collision
         # A collision row met (to 1e-9 m) also limited the step.
-        met = len(h) and np.any(self._G_collision.dot(qdot) * dt >= h - 1e-9)
+        met = bool(len(h)) and bool(np.any(self._G_collision.dot(qdot) * dt >= h - 1e-9))
+        self.collision_held = met
         if met and status is IKStatus.OK:
             status = IKStatus.LIMITED
         return qdot, status

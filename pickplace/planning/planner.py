@@ -543,6 +543,113 @@ class PickPlacePlanner:
             tuple(tried), chosen, total, self.preflight.config, len(ranked), times
         )
 
+    def observe_world(self, mocap_pos: np.ndarray, mocap_quat: np.ndarray) -> None:
+        """Take the world's moving bodies' poses into the pre-flight's collision model, so that
+        the next plans are checked (and C-space paths routed) around them where they are now.
+
+        Args:
+            mocap_pos: The simulation's ``data.mocap_pos`` (nmocap, 3) [m].
+            mocap_quat: Its ``data.mocap_quat`` (nmocap, 4), wxyz.
+        """
+        self.preflight.observe_world(mocap_pos, mocap_quat)
+
+    def plan_held(self, start: Start, X_WO_held: SE3, X_WO_place: SE3, X_OG: SE3) -> PlanningReport:
+        """The rest of a pick-and-place whose brick is in the hand: from ``start`` straight on
+        to the pre-place (in C-space when that collides), then the place, release and retreat
+        of a plan from there, the gripper kept closed until the release.
+
+        The plan's grasp is the one whose tool pose in the object frame is ``X_OG`` (the grasp
+        the brick is held by), so the brick's pose in the hand is ``X_OG``'s; its phases start
+        holding (``approach`` and ``grip_closed`` at 0, the transport from 0 to the
+        pre-place), so the run's grasp monitor judges the grip at once and watches for a drop
+        from there. The path is swept, timed and pre-flighted as every candidate
+        (:meth:`planned`'s C-space fallback included).
+
+        Args:
+            start: The arm's commanded configuration and tool pose.
+            X_WO_held: The brick's pose in world now (in the hand).
+            X_WO_place: Goal pose of the brick.
+            X_OG: The tool site in the object frame, as held.
+
+        Raises:
+            PlanError: ``start.q`` is not one finite angle per arm joint.
+        """
+        t0 = time.perf_counter()
+        self._cspace_time, self._attempts = 0.0, 0
+        start = Start(start_configuration(self.scene, start.q), start.X_WG)
+        R, p = X_OG.rotation().as_matrix(), X_OG.translation()
+        grasp = min(
+            self._grasps,
+            key=lambda g: float(
+                np.linalg.norm(g.X_OG.translation() - p)
+                + np.linalg.norm(g.X_OG.rotation().as_matrix() - R)
+            ),
+        )
+        grasp = replace(grasp, X_OG=X_OG)
+        path = self._held_path(start, X_WO_held, X_WO_place, grasp)
+        swept = self.preflight.run(path, X_WO_held, X_WO_place, q_start=start.q)
+        attempt: CSpaceAttempt | None = None
+        problem, phases = swept.problem, path.phases
+        assert phases is not None
+        if swept.feasible:
+            plan, warning = self.retimed(path, swept.times, swept.q)
+            result = self.preflight.run(plan, X_WO_held, X_WO_place, q_start=start.q)
+        elif (
+            problem is not None and problem.kind == "collision" and problem.t <= phases.transport[1]
+        ):
+            plan, result, warning, attempt = self.cspace_plan(
+                X_WO_held, X_WO_place, path, swept, start
+            )
+        else:
+            plan, result, warning = path, swept, None
+        total = time.perf_counter() - t0
+        times = {"cartesian": total - self._cspace_time, "c-space": self._cspace_time}
+        candidate = Candidate(f"{grasp.label}, held", plan, result, warning, attempt)
+        return PlanningReport(
+            (candidate,), 0 if result.feasible else None, total, self.preflight.config, 1, times
+        )
+
+    def _held_path(
+        self, start: Start, X_WO_held: SE3, X_WO_place: SE3, grasp: GraspCandidate
+    ) -> Plan:
+        """The swept path of :meth:`plan_held`: ``start``, then the keyframes from the
+        pre-place on of the pick-and-place :meth:`make_plan` makes from ``start`` with the
+        brick picked where it is held, timed by the path sweep's limits."""
+        full = self.make_plan(X_WO_held, X_WO_place, grasp, self.sweep_config, start)
+        ph = full.phases
+        assert ph is not None and full.X_OG is not None
+        keyframes = full.trajectory.keyframes
+        times = [k.t for k in keyframes]
+        i_pre = _keyframe_at(times, ph.transport[1])
+        closed = keyframes[i_pre].gripper_width
+        waypoints = [Waypoint("replan-start", start.X_WG, closed, 0.0, stop=True)]
+        waypoints += [
+            Waypoint(
+                k.name,
+                k.X_WG,
+                k.gripper_width,
+                k.hold,
+                stop=k.stop or i == i_pre,
+                curve=k.curve and i != i_pre,
+            )
+            for i, k in enumerate(keyframes)
+            if i >= i_pre
+        ]
+        new = time_keyframes(waypoints, self.sweep_config)
+
+        def moved(t: float) -> float:
+            return new[1 + _keyframe_at(times, t) - i_pre].t
+
+        phases = Phases(
+            approach=(0.0, 0.0),
+            grip_closed=0.0,
+            transport=(0.0, new[1].t),
+            place_reached=moved(ph.place_reached),
+            release=moved(ph.release),
+        )
+        trajectory = PoseTrajectory(new, self.sweep_config.profile)
+        return Plan(trajectory, phases, full.X_OG)
+
     def _refused(self, plan: Plan, ranked: Ranked) -> PreflightResult:
         """A pre-flight result for a candidate refused by a cheap test, at the pick."""
         t = plan.phases.approach[1] if plan.phases is not None else 0.0

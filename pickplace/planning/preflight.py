@@ -431,6 +431,18 @@ class Preflight:
         p = self.data.xanchor[self.scene.robot.arm_joint_ids[j]]
         return (float(p[0]), float(p[1]), float(p[2]))
 
+    def observe_world(self, mocap_pos: np.ndarray, mocap_quat: np.ndarray) -> None:
+        """Place the collision model's mocap bodies (an obstacle a fault moved) where the
+        simulation has them: the kinematics of every later check (:meth:`run`,
+        :meth:`clearance`) puts them there.
+
+        Args:
+            mocap_pos: The simulation's ``data.mocap_pos`` (nmocap, 3) [m].
+            mocap_quat: Its ``data.mocap_quat`` (nmocap, 4), wxyz.
+        """
+        self.data.mocap_pos[:] = mocap_pos
+        self.data.mocap_quat[:] = mocap_quat
+
     def _load_arm(self, q: np.ndarray) -> None:
         """Arm at ``q``: kinematics only."""
         self.data.qpos[self.scene.robot.arm_qpos_adr] = q

@@ -496,6 +496,7 @@ class Simulation:
         """The per-tick part of :meth:`_command_ticks`: plan samples and IK."""
         log, dt, ff = self.log, self.dt, self._ff
         sample, command = self._sample, self._command
+        controller = self.controller
         segment_index = self._plan.trajectory.segment_index
         t_start = self.plan_start
         dynamics = self._dynamics if self._use_dynamics else None
@@ -539,6 +540,7 @@ class Simulation:
             qdot_prev = qdot
             log.gripper_cmd[k] = width
             log.ik_status[k] = _STATUS_CODE_BY_ID[id(res.status)]
+            log.collision_held[k] = controller.collision_held
             if not finite:
                 return k + 1
         return k1

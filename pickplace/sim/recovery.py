@@ -38,8 +38,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from mink.lie import SE3
+from mink.lie import SE3, SO3
 
+from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, require_positive
 from pickplace.geometry import FloatArray
 from pickplace.planning.plan import Plan
@@ -70,6 +71,13 @@ class RecoveryConfig:
             the fastest-braking joint i (1.5 is the peak of the speed profile's slope), and
             the rest is left to the plan's own acceleration, which the slow-down scales by the
             square of the falling speed.
+        held_stop_time: Duration of a stop where the collision limit holds the arm against
+            the world [s]: the commanded arm brakes along its own joint motion
+            (:class:`CommandedDrift`), which the limit may block, the commanded tool then
+            falling behind the stop; over the acceleration limits' stop time (0.3–0.6 s for
+            the bundled robots in ``fault-obstacle``) the menagerie iiwa's fell 20 mm behind,
+            so this stop brakes over a fixed short time (peak deceleration 1.5 q̇ / this,
+            beyond ``accel_limits`` for a fast arm).
         min_stop_time: Shortest stop [s] (the gripper opens over it).
         rise: Height the tool backs off straight up after stopping [m], at most (never above
             the planner's transfer clearance height).
@@ -85,6 +93,7 @@ class RecoveryConfig:
     """
 
     accel_fraction: float = 0.5
+    held_stop_time: float = 0.15
     min_stop_time: float = 0.15
     rise: float = 0.10
     rise_speed: float = 0.25
@@ -97,6 +106,7 @@ class RecoveryConfig:
         """Validate every field (finite and > 0; ``accel_fraction`` at most 1)."""
         for name in (
             "accel_fraction",
+            "held_stop_time",
             "min_stop_time",
             "rise",
             "rise_speed",
@@ -221,6 +231,59 @@ class StopTrajectory(PoseTrajectory):
         return x, V * s_dot, self.width0 + u * (self.width_open - self.width0)
 
 
+def limit_held(run: RunControl, failure: Failure) -> bool:
+    """Whether ``failure`` is an ``ik-failed`` that the controller's collision limit caused:
+    the tool fell behind the plan (not a QP without solution) at a tick whose step met a row
+    of the limit (:attr:`~pickplace.control.controllers.DiffIKController.collision_held`,
+    logged per tick), i.e. the limit, not the arm's reach or its speed limits, held the tool
+    back from a plan that runs into the world."""
+    return (
+        failure.reason is FailureReason.IK_FAILED
+        and 0 <= failure.tick < run.ticks
+        and bool(run.log.collision_held[failure.tick])
+        and float(run.log.command_error[failure.tick]) > run.criteria.tracking_limit
+    )
+
+
+class CommandedDrift(PoseTrajectory):
+    """The commanded arm's motion continued from one tick: its joints moving on at that tick's
+    commanded joint velocities, the tool where the forward kinematics puts it, the gripper at
+    one width. A :class:`StopTrajectory` along it slows the commanded arm down from where the
+    IK had it, not from where the plan was (a plan the collision limit held the tool back
+    from runs into the world). Continued in joint space, the motion keeps a distance the limit
+    held constant (its gradient times q̇ was zero) constant to first order; a twist continued
+    in Cartesian space would turn the links into the world.
+
+    Args:
+        kinematics: Arm kinematics (changed by :meth:`sample`).
+        q: The commanded joint positions at the tick [rad].
+        qdot: The tick's commanded joint velocities [rad/s].
+        width: Gripper command [m].
+    """
+
+    def __init__(
+        self, kinematics: ArmKinematics, q: FloatArray, qdot: FloatArray, width: float
+    ) -> None:
+        self.kinematics = kinematics
+        self.q0 = np.asarray(q, dtype=np.float64).copy()
+        self.qdot0 = np.asarray(qdot, dtype=np.float64).copy()
+        self.width = float(width)
+        kinematics.update(self.q0)
+        X0 = kinematics.X_WG()
+        super().__init__(
+            [Keyframe("commanded", 0.0, X0, self.width), Keyframe("on", 1.0, X0, self.width)],
+            "linear",
+        )
+
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray, float]:
+        """Tool pose (wxyz_xyz) at ``q + q̇ t`` (``t`` [s]), its spatial velocity ``J q̇``
+        [m/s, rad/s] there, and the width [m]."""
+        kin = self.kinematics
+        kin.update(self.q0 + self.qdot0 * t)
+        x = np.array(kin.wxyz_xyz_list())
+        return x, kin.J_WG().dot(self.qdot0), self.width
+
+
 def stop_time(run: RunControl, config: RecoveryConfig) -> float:
     """How long the arm takes to stop from its last commanded joint speeds [s] (see
     :attr:`RecoveryConfig.accel_fraction`)."""
@@ -274,8 +337,8 @@ class Reattempt:
             self._stop is not None
             or len(self._attempts) >= self.max_attempts
             or not failures
-            or any(f.reason not in RECOVERABLE for f in failures)
             or run.ticks < 1
+            or not all(f.reason in RECOVERABLE or limit_held(run, f) for f in failures)
         ):
             return False
         failure = failures[0]
@@ -284,15 +347,30 @@ class Reattempt:
         t_stop = stop_time(run, self.config)
         plan = run.plan
         width0 = float(run.log.gripper_cmd[k])
-        width_open = max(width0, *(kf.gripper_width for kf in plan.trajectory.keyframes))
         t0 = k * dt - run.plan_start
         cfg = self.config
-        z_stopped = float(plan.trajectory.sample(t0 + 0.5 * t_stop)[0][6])
-        rise = min(cfg.rise, max(0.0, self.planner.clearance_z - z_stopped))
+        if failure.reason in RECOVERABLE:
+            width_open = max(width0, *(kf.gripper_width for kf in plan.trajectory.keyframes))
+            path: PoseTrajectory = plan.trajectory
+            z_stopped = float(path.sample(t0 + 0.5 * t_stop)[0][6])
+            rise = min(cfg.rise, max(0.0, self.planner.clearance_z - z_stopped))
+            how = (
+                f"the arm stops along its path over {t_stop:.2f} s, the gripper opening, backs "
+                f"off {rise * 1000:.0f} mm up and waits for the brick to rest"
+            )
+        else:  # held back by the collision limit: stop where the IK has the tool, holding on
+            # From the configuration the tick's command started at (its tool pose is the
+            # tick's commanded one), on at its joint velocities.
+            q_k = run.log.q_cmd[k] - run.log.qdot_cmd[k] * dt
+            drift = CommandedDrift(ArmKinematics(run.scene), q_k, run.log.qdot_cmd[k], width0)
+            t_stop = cfg.held_stop_time
+            path, t0, width_open, rise = drift, 0.0, width0, 0.0
+            how = (
+                f"the arm stops where the collision limit holds it over {t_stop:.2f} s, the "
+                "gripper as it is, and plans around the world as it is now"
+            )
         rise_time = max(cfg.min_stop_time, _SINE.min_duration(rise, cfg.rise_speed, cfg.rise_accel))
-        stop = StopTrajectory(
-            plan.trajectory, t0, t_stop, rise, rise_time, cfg.max_wait, width0, width_open
-        )
+        stop = StopTrajectory(path, t0, t_stop, rise, rise_time, cfg.max_wait, width0, width_open)
         current = self._attempts[-1]
         text = f"{failure.reason.value}: {failure.text}"
         try:
@@ -300,9 +378,7 @@ class Reattempt:
                 Plan(stop),
                 k * dt,
                 f"attempt {current.number} of {self.max_attempts} failed at t="
-                f"{(failure.tick + 1) * dt:.2f} s ({text}); the arm stops along its path over "
-                f"{t_stop:.2f} s, the gripper opening, backs off {rise * 1000:.0f} mm up and "
-                "waits for the brick to rest",
+                f"{(failure.tick + 1) * dt:.2f} s ({text}); {how}",
             )
         except InvalidInputError:  # the run's log would pass its memory bound
             return False
@@ -340,6 +416,10 @@ class Reattempt:
         t_plan = run.ticks * run.dt - run.plan_start
         if t_plan < stop.rest_time:
             return None
+        # The planner sees the world as the simulation has it (an obstacle that moved).
+        self.planner.observe_world(run.data.mocap_pos, run.data.mocap_quat)
+        if taken.reason not in RECOVERABLE and brick_touches_robot(run.scene, run.data):
+            return self._replan_held(run, stop, taken)
         ready, why = self._brick_ready(run)
         if not ready:
             if t_plan >= stop.rest_time + self.config.max_wait:
@@ -384,6 +464,40 @@ class Reattempt:
         self._stop = self._taken = None
         return None
 
+    def _replan_held(self, run: RunControl, stop: StopTrajectory, taken: Failure) -> Failure | None:
+        """Plan the rest of the task with the brick in the hand, from where the arm stopped
+        (:meth:`~pickplace.planning.planner.PickPlacePlanner.plan_held`), and put it in place;
+        give up when no plan is feasible."""
+        X_WO = brick_pose(run.scene, run.data)
+        k = run.ticks - 1
+        X_WG_sim = SE3.from_rotation_and_translation(
+            SO3.from_matrix(run.log.R_WG[k]), run.log.p_WG[k].copy()
+        )
+        X_OG = X_WO.inverse() @ X_WG_sim  # the grasp as the hand holds the brick now
+        start = Start(run.q_cmd.copy(), stop.X_WG_rest)
+        report = self.planner.plan_held(start, X_WO, self.X_WO_goal, X_OG)
+        if not report.feasible:
+            return self._give_up(
+                taken,
+                f"no new plan carries the brick on from where the arm stopped: {report.refusal()}",
+            )
+        assert report.chosen is not None
+        chosen = report.candidates[report.chosen]
+        number = len(self._attempts) + 1
+        how = "around the world as it is now in C-space" if report.used_cspace else "straight on"
+        try:
+            run.replace_plan(
+                report.plan,
+                run.ticks * run.dt,
+                f"attempt {number} of {self.max_attempts}: plan '{chosen.label}' carries the "
+                f"brick on from where the arm stopped to the pre-place ({how}) and places it",
+            )
+        except InvalidInputError as exc:  # the run's log would pass its memory bound
+            return self._give_up(taken, str(exc))
+        self._attempts.append(Attempt(number, run.ticks, run.ticks * run.dt, chosen.label))
+        self._stop = self._taken = None
+        return None
+
     def _brick_ready(self, run: RunControl) -> tuple[bool, str]:
         """Whether the brick rests free of the robot, or why not (its words end a sentence
         that a time completes)."""
@@ -413,8 +527,10 @@ class Reattempt:
 __all__ = [
     "MAX_ATTEMPTS",
     "RECOVERABLE",
+    "CommandedDrift",
     "Reattempt",
     "RecoveryConfig",
     "StopTrajectory",
     "check_attempts",
+    "limit_held",
 ]

@@ -51,6 +51,8 @@ class TickLog:
         self.gripper_cmd = np.zeros(n)  # commanded pad gap [m]
         self.ik_us = np.zeros(n)
         self.ik_status = np.zeros(n, dtype=np.int8)
+        # 1 where the step met a row of the controller's collision limit (collision_held).
+        self.collision_held = np.zeros(n, dtype=np.int8)
         # The robot's actuator commands, arm then gripper (one row is sent to MuJoCo per tick):
         # position targets q_cmd + (kv/kp) q̇_cmd, and the gripper command for gripper_cmd.
         self.ctrl = np.zeros((n, nq + n_grip))
