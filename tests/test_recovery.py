@@ -15,10 +15,22 @@ from pickplace.errors import InvalidInputError, PlanError
 from pickplace.planning.planner import PickPlacePlanner, Start
 from pickplace.planning.preflight import Preflight
 from pickplace.run.runner import RunRequest, prepare
-from pickplace.sim.checks import CheckContext, FailureReason, GraspMonitor, SuccessCriteria
+from pickplace.sim.checks import (
+    CheckContext,
+    Failure,
+    FailureReason,
+    GraspMonitor,
+    SuccessCriteria,
+)
 from pickplace.sim.events import EventKind
 from pickplace.sim.loop import Simulation
-from pickplace.sim.recovery import RECOVERABLE, Reattempt, StopTrajectory, check_attempts
+from pickplace.sim.recovery import (
+    RECOVERABLE,
+    Reattempt,
+    StopTrajectory,
+    check_attempts,
+    limit_held,
+)
 from pickplace.sim.ticklog import TickLog
 from pickplace.sim.verdict import WALL_TIME_FIELDS, RunResult, placement_problems
 from pickplace.world.scene import Scene
@@ -338,3 +350,62 @@ def test_a_sweep_counts_the_trials_that_replanned() -> None:
     ]
     report = outcome_report(trials, {}, VaryPlan())
     assert report["replanned"] == {"trials": 2, "successes": 1}
+
+
+# ------------------------------------------------------------ held back by the collision limit
+
+
+class _Run:
+    """The parts of a run :func:`limit_held` reads."""
+
+    def __init__(self, log: TickLog, ticks: int) -> None:
+        self.log, self.ticks, self.criteria = log, ticks, SuccessCriteria()
+
+
+def test_only_an_ik_failed_at_a_tick_the_collision_limit_held_is_limit_held(scene: Scene) -> None:
+    log = TickLog(scene, 10, 0.01)
+    log.command_error[5] = 0.025  # behind the plan, beyond the 20 mm tracking limit
+    run = _Run(log, 10)
+    behind = Failure(5, FailureReason.IK_FAILED, "behind")
+    assert not limit_held(run, behind)  # the limit's rows were not met there
+    log.collision_held[5] = 1
+    assert limit_held(run, behind)
+    assert not limit_held(run, Failure(5, FailureReason.COLLISION, "touched"))
+    log.command_error[4], log.collision_held[4] = 0.0, 1
+    # A QP without solution at a held tick is not the limit's doing.
+    assert not limit_held(run, Failure(4, FailureReason.IK_FAILED, "no solution"))
+    assert not limit_held(_Run(log, 5), behind)  # a tick not yet run
+
+
+@pytest.mark.slow
+def test_an_ik_failed_the_collision_limit_did_not_cause_is_not_taken_up() -> None:
+    """fault-unreachable's place target lies out of reach: ik-failed with the limit idle, so
+    3 attempts end as one does."""
+    _, three = _run("fault-unreachable", 3)
+    _, one = _run("fault-unreachable", 1)
+    assert three.failure is FailureReason.IK_FAILED
+    assert _without_wall_time(three.summary()) == _without_wall_time(one.summary())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ["iiwa14-wsg50", "panda-hand", "menagerie-iiwa14-2f85"])
+def test_an_obstacle_in_the_transfer_is_planned_around_with_the_brick_in_hand(robot: str) -> None:
+    """fault-obstacle with 3 attempts: the limit holds the arm off the box (ik-failed), the
+    recovery stops it there and carries the brick on around the box; no robot–world contact,
+    the box never touched, the brick never let go between the attempts."""
+    sim, result = _run("fault-obstacle", 3, robot=robot)
+    summary = result.summary()
+    assert result.success, result.failure_text
+    first, second = summary["attempts"]
+    assert first["failure"] == "ik-failed" and second["success"]
+    assert second["candidate"].endswith(", held")
+    assert len(summary["replans"]) == 1
+    assert summary["max_robot_world_contact_force_n"] == 0.0
+    log, ticks = sim.log, sim.ticks
+    assert log.collision_held[first["failure_tick"]] == 1
+    assert (log.robot_world_contacts[:ticks] == 0).all()
+    # Still held when the new plan starts: both pads push on the brick.
+    assert (log.pad_force[second["start_tick"] - 1] > 1.0).all()
+    _, once = _run("fault-obstacle", 1, robot=robot)
+    assert once.failure is FailureReason.IK_FAILED
+    assert once.failure_text == first["failure_text"]
