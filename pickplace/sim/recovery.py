@@ -24,11 +24,22 @@ grasp does not turn it over), or no plan is feasible from where it lies, the run
 failure that was taken up, at its tick, its text saying why it could not be recovered.
 
 Which failures are recoverable (:data:`RECOVERABLE`): ``missed-grasp`` and ``dropped``, where
-the brick lies somewhere in the world the arm left intact. Not ``collision`` (the robot hit
-the world: a real cell stops), ``ik-failed`` and ``limit-violated`` (the controller cannot
-follow plans from here: a new plan from the same state would fail again), ``nan`` (the state
-is lost), ``not-in-target-bin`` (the end-state verdict, judged when the run is over) nor
-``interrupted``.
+the brick lies somewhere in the world the arm left intact; and an ``ik-failed`` that the
+controller's collision limit caused (:func:`limit_held`: the tool fell behind the plan at a
+tick whose step met a row of the limit, as the controller reports per tick into the log's
+``collision_held``), where the plan runs into a world that changed after planning. Not
+``collision`` (the robot hit the world: a real cell stops), any other ``ik-failed`` and
+``limit-violated`` (the controller cannot follow plans from here: a new plan from the same
+state would fail again), ``nan`` (the state is lost), ``not-in-target-bin`` (the end-state
+verdict, judged when the run is over) nor ``interrupted``.
+
+A limit-held ``ik-failed`` is taken up differently: the arm stops along its own commanded
+joint motion (:class:`CommandedDrift`, over :attr:`RecoveryConfig.held_stop_time`), not the
+plan's path, with the gripper as it is and no rise; every replan first hands the planner the
+simulation's mocap poses (the obstacle where it is now); and while the brick is still in the
+hand the next attempt carries it on from there
+(:meth:`~pickplace.planning.planner.PickPlacePlanner.plan_held`: to the pre-place, in
+C-space around what blocks, then the place), instead of waiting for it to rest.
 """
 
 from __future__ import annotations
