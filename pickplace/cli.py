@@ -288,7 +288,9 @@ def _add_attempts(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="most attempts of a run, 1 to 10 (default: 1; or --vary attempts=a,b): after a "
         "missed grasp or a drop the "
-        "arm stops, the brick is left to rest and the run plans again from where it lies",
+        "arm stops, the brick is left to rest and the run plans again from where it lies; "
+        "after an ik-failed the collision limit caused, the rest is planned around the world "
+        "as it is, the brick kept in the hand",
     )
 
 

@@ -8,9 +8,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
 import pytest
 
+from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, PlanError
 from pickplace.planning.planner import PickPlacePlanner, Start
 from pickplace.planning.preflight import Preflight
@@ -26,13 +28,14 @@ from pickplace.sim.events import EventKind
 from pickplace.sim.loop import Simulation
 from pickplace.sim.recovery import (
     RECOVERABLE,
+    CommandedDrift,
     Reattempt,
     StopTrajectory,
     check_attempts,
     limit_held,
 )
 from pickplace.sim.ticklog import TickLog
-from pickplace.sim.verdict import WALL_TIME_FIELDS, RunResult, placement_problems
+from pickplace.sim.verdict import WALL_TIME_FIELDS, RunResult, brick_pose, placement_problems
 from pickplace.world.scene import Scene
 from tests.conftest import CliRun
 
@@ -409,3 +412,43 @@ def test_an_obstacle_in_the_transfer_is_planned_around_with_the_brick_in_hand(ro
     _, once = _run("fault-obstacle", 1, robot=robot)
     assert once.failure is FailureReason.IK_FAILED
     assert once.failure_text == first["failure_text"]
+
+
+def test_the_held_stop_follows_the_commanded_joints_on(scene: Scene) -> None:
+    """CommandedDrift: at 0 the commanded tool pose, moving at J q̇; later the forward
+    kinematics of q + q̇ t."""
+    kin = ArmKinematics(scene)
+    q0 = scene.robot.q_home.copy()
+    qdot = np.linspace(-0.2, 0.3, len(q0))
+    drift = CommandedDrift(ArmKinematics(scene), q0, qdot, 0.03)
+    kin.update(q0)
+    x, V, w = drift.sample(0.0)
+    np.testing.assert_allclose(x, kin.X_WG().wxyz_xyz, atol=1e-12)
+    np.testing.assert_allclose(V, kin.J_WG().dot(qdot), atol=1e-12)
+    assert w == 0.03
+    kin.update(q0 + 0.4 * qdot)
+    np.testing.assert_allclose(drift.sample(0.4)[0], kin.X_WG().wxyz_xyz, atol=1e-12)
+    # Slowed to rest by a StopTrajectory along it, as the recovery does.
+    stop = StopTrajectory(drift, 0.0, 0.15, 0.0, 0.15, 1.0, 0.03, 0.03)
+    assert np.abs(stop.sample(0.15)[1]).max() < 1e-9
+    V0 = drift.sample(0.0)[1]
+    np.testing.assert_allclose(stop.sample(1e-9)[1], V0, atol=1e-6)
+    assert np.linalg.norm(V0) > 0.01
+
+
+def test_the_pre_flight_sees_a_mocap_obstacle_where_the_simulation_has_it(scene: Scene) -> None:
+    preflight = Preflight(scene, "qp")
+    obstacle = int(mujoco.mj_name2id(scene.model, mujoco.mjtObj.mjOBJ_BODY, "obstacle"))
+    mocap = int(scene.model.body_mocapid[obstacle])
+    kin = ArmKinematics(scene)
+    kin.update(scene.robot.q_home)
+    data = mujoco.MjData(scene.model)
+    mujoco.mj_forward(scene.model, data)
+    X_WO = brick_pose(scene, data)
+    kinds = preflight.pair_kinds(X_WO, X_WO)
+    parked, _ = preflight.clearance(scene.robot.q_home, 0.0, X_WO, kinds, False)
+    pos, quat = data.mocap_pos.copy(), data.mocap_quat.copy()
+    pos[mocap] = kin.X_WG().translation() + np.array([0.0, 0.0, 0.1])  # over the tool
+    preflight.observe_world(pos, quat)
+    near, contact = preflight.clearance(scene.robot.q_home, 0.0, X_WO, kinds, False)
+    assert near < parked and contact is not None and "obstacle" in contact[1]
