@@ -53,9 +53,9 @@ from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, require_positive
-from pickplace.geometry import FloatArray
+from pickplace.geometry import FloatArray, box_corners, transform_points
 from pickplace.planning.plan import Plan
-from pickplace.planning.planner import PickPlacePlanner, Start
+from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
 from pickplace.sim.checks import Failure, FailureReason
 from pickplace.sim.task import RunControl
@@ -67,6 +67,10 @@ RECOVERABLE: frozenset[FailureReason] = frozenset(
 """The failures a run may try again after (see the module docstring)."""
 
 _SINE = profile_by_name("sine")
+
+PLACE_SHIFTS: tuple[float, ...] = (0.02, 0.04, 0.06, 0.08)
+"""How far a held replan may move the brick's goal away from what blocks its place [m], in
+the order tried (:meth:`Reattempt._held_elsewhere`)."""
 
 MAX_ATTEMPTS = 10
 """The most attempts a run may take (``--attempts``)."""
@@ -487,6 +491,12 @@ class Reattempt:
         X_OG = X_WO.inverse() @ X_WG_sim  # the grasp as the hand holds the brick now
         start = Start(run.q_cmd.copy(), stop.X_WG_rest)
         report = self.planner.plan_held(start, X_WO, self.X_WO_goal, X_OG)
+        moved = ""
+        if not report.feasible:
+            shifted = self._held_elsewhere(run, start, X_WO, X_OG, report)
+            if shifted is not None:
+                report, shift = shifted
+                moved = f", its goal moved {shift * 1000:.0f} mm away from what blocks its place"
         if not report.feasible:
             return self._give_up(
                 taken,
@@ -501,12 +511,51 @@ class Reattempt:
                 report.plan,
                 run.ticks * run.dt,
                 f"attempt {number} of {self.max_attempts}: plan '{chosen.label}' carries the "
-                f"brick on from where the arm stopped to the pre-place ({how}) and places it",
+                f"brick on from where the arm stopped to the pre-place ({how}) and places it"
+                f"{moved}",
             )
         except InvalidInputError as exc:  # the run's log would pass its memory bound
             return self._give_up(taken, str(exc))
         self._attempts.append(Attempt(number, run.ticks, run.ticks * run.dt, chosen.label))
         self._stop = self._taken = None
+        return None
+
+    def _held_elsewhere(
+        self, run: RunControl, start: Start, X_WO: SE3, X_OG: SE3, report: PlanningReport
+    ) -> tuple[PlanningReport, float] | None:
+        """When the held plan collides after its transfer (placing: the world that changed
+        stands beside the goal), the first feasible held plan with the goal moved horizontally
+        straight away from the collision's point by one of :data:`PLACE_SHIFTS`, the brick's
+        footprint kept inside the target bin's inner walls by the pre-flight's clearance
+        (the placement verdict wants it in the bin, not at the goal); with the shift [m]."""
+        candidate = report.candidates[0]
+        problem, phases = candidate.preflight.problem, candidate.plan.phases
+        if (
+            problem is None
+            or problem.kind != "collision"
+            or problem.point_W is None
+            or phases is None
+            or problem.t <= phases.transport[1]
+        ):
+            return None
+        goal = self.X_WO_goal.translation()
+        away = goal - np.asarray(problem.point_W, dtype=np.float64)
+        away[2] = 0.0
+        norm = float(np.linalg.norm(away))
+        if norm < 1e-9:
+            return None
+        away /= norm
+        scene, margin = run.scene, self.planner.preflight.config.clearance
+        corners = box_corners(scene.brick_half_extents)
+        for shift in PLACE_SHIFTS:
+            X_goal = SE3.from_rotation_and_translation(
+                self.X_WO_goal.rotation(), goal + shift * away
+            )
+            if not scene.target_bin.contains_xy(transform_points(X_goal, corners), margin):
+                return None
+            moved = self.planner.plan_held(start, X_WO, X_goal, X_OG)
+            if moved.feasible:
+                return moved, shift
         return None
 
     def _brick_ready(self, run: RunControl) -> tuple[bool, str]:
@@ -537,6 +586,7 @@ class Reattempt:
 
 __all__ = [
     "MAX_ATTEMPTS",
+    "PLACE_SHIFTS",
     "RECOVERABLE",
     "CommandedDrift",
     "Reattempt",
