@@ -391,7 +391,9 @@ def test_an_ik_failed_the_collision_limit_did_not_cause_is_not_taken_up() -> Non
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("robot", ["iiwa14-wsg50", "panda-hand", "menagerie-iiwa14-2f85"])
+@pytest.mark.parametrize(
+    "robot", ["iiwa14-wsg50", "panda-hand", "menagerie-iiwa14-2f85", "ur5e-2f85"]
+)
 def test_an_obstacle_in_the_transfer_is_planned_around_with_the_brick_in_hand(robot: str) -> None:
     """fault-obstacle with 3 attempts: the limit holds the arm off the box (ik-failed), the
     recovery stops it there and carries the brick on around the box; no robot–world contact,
