@@ -14,15 +14,11 @@ from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.loader import load_scene
 from pickplace.sim.loop import Simulation
 from pickplace.sim.scenarios import BuildRequest, get_scenario
-from pickplace.sim.verdict import WALL_TIME_FIELDS
 from tests.conftest import finished, without_wall_time
 
 
 def _summary(sim: Simulation) -> dict[str, Any]:
-    summary = sim.run().summary()
-    for key in WALL_TIME_FIELDS:
-        summary.pop(key)
-    return summary
+    return without_wall_time(sim.run().summary())
 
 
 @pytest.mark.slow
