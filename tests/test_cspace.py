@@ -11,7 +11,13 @@ import pytest
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.geometry import rotation_vector_W
 from pickplace.planning import cspace
-from pickplace.planning.cspace import CSpaceConfig, JointMotion, JointPath, plan_joint_path
+from pickplace.planning.cspace import (
+    CSpaceConfig,
+    CSpaceResult,
+    JointMotion,
+    JointPath,
+    plan_joint_path,
+)
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport
 from pickplace.signals import Interrupted
 from pickplace.sim.loader import load_scene
@@ -222,15 +228,17 @@ def test_a_toy_wall_is_passed_over_every_spline_point_free() -> None:
     np.testing.assert_allclose(qs[-1], [1, 0], atol=1e-12)
 
 
-def test_no_path_within_the_budget_names_what_refused_most() -> None:
-    def boxed(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
-        if 0.45 <= q[0] <= 0.55:
-            return -0.01, ("toy/link", "wall", (0.0, 0.0, 0.0))
-        return 1.0, None
+def _walled_off(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
+    """A toy check: a wall across the whole space at q0 in [0.45, 0.55] (no way around)."""
+    if 0.45 <= q[0] <= 0.55:
+        return -0.01, ("toy/link", "wall", (0.0, 0.0, 0.0))
+    return 1.0, None
 
-    config = CSpaceConfig(max_checks=500)
-    result = plan_joint_path(
-        boxed,
+
+def _plan_through_the_wall(config: CSpaceConfig) -> CSpaceResult:
+    """From (0, 0) to (1, 0) through :func:`_walled_off`'s wall: no path exists."""
+    return plan_joint_path(
+        _walled_off,
         np.zeros(2),
         np.array([1.0, 0.0]),
         -np.ones(2),
@@ -240,26 +248,17 @@ def test_no_path_within_the_budget_names_what_refused_most() -> None:
         4,
         config,
     )
+
+
+def test_no_path_within_the_budget_names_what_refused_most() -> None:
+    result = _plan_through_the_wall(CSpaceConfig(max_checks=500))
     assert result.path is None and result.problem is not None
     assert "within 500 collision checks" in result.problem and "wall" in result.problem
     assert result.checks <= 500 + 1  # the budget is counted, not timed: the same everywhere
 
 
 def test_the_wall_time_bound_also_ends_a_planning() -> None:
-    def boxed(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
-        return (-0.01, ("a", "wall", (0.0, 0.0, 0.0))) if 0.45 <= q[0] <= 0.55 else (1.0, None)
-
-    result = plan_joint_path(
-        boxed,
-        np.zeros(2),
-        np.array([1.0, 0.0]),
-        -np.ones(2),
-        2 * np.ones(2),
-        np.ones(2),
-        0.0,
-        4,
-        CSpaceConfig(max_checks=10**9, budget_s=0.05),
-    )
+    result = _plan_through_the_wall(CSpaceConfig(max_checks=10**9, budget_s=0.05))
     assert result.path is None and result.time_s < 1.0
 
 
@@ -273,21 +272,8 @@ def test_a_stop_request_ends_the_planning(monkeypatch: pytest.MonkeyPatch) -> No
 
     monkeypatch.setattr(cspace, "stop_point", stop)
 
-    def boxed(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
-        return (-0.01, ("a", "b", (0.0, 0.0, 0.0))) if 0.45 <= q[0] <= 0.55 else (1.0, None)
-
     with pytest.raises(Interrupted):
-        plan_joint_path(
-            boxed,
-            np.zeros(2),
-            np.array([1.0, 0.0]),
-            -np.ones(2),
-            2 * np.ones(2),
-            np.ones(2),
-            0.0,
-            4,
-            CSpaceConfig(budget_s=30.0),
-        )
+        _plan_through_the_wall(CSpaceConfig(budget_s=30.0))
 
 
 def test_the_config_is_validated() -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
@@ -176,6 +176,17 @@ class Phases:
         for (name_a, a), (name_b, b) in itertools.pairwise(order):
             if not (math.isfinite(a) and math.isfinite(b) and a <= b):
                 raise PlanError(f"phase {name_b} (t={b!r} s) must not precede {name_a} (t={a!r} s)")
+
+    def mapped(self, moved: Callable[[float], float]) -> Phases:
+        """These phases on another clock: every time t becomes ``moved(t)`` [s] (a plan
+        retimed, or motions replaced, keyframe by keyframe)."""
+        return Phases(
+            approach=(moved(self.approach[0]), moved(self.approach[1])),
+            grip_closed=moved(self.grip_closed),
+            transport=(moved(self.transport[0]), moved(self.transport[1])),
+            place_reached=moved(self.place_reached),
+            release=moved(self.release),
+        )
 
 
 @dataclass(frozen=True)

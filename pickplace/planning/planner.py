@@ -959,13 +959,7 @@ class PickPlacePlanner:
 
         ph = path.phases
         assert ph is not None
-        phases = Phases(
-            approach=(moved(ph.approach[0]), moved(ph.approach[1])),
-            grip_closed=moved(ph.grip_closed),
-            transport=(moved(ph.transport[0]), moved(ph.transport[1])),
-            place_reached=moved(ph.place_reached),
-            release=moved(ph.release),
-        )
+        phases = ph.mapped(moved)
         joints: list[JointSegment | None] = [None] * (len(new) - 1)
         joints[index[i_lift]] = motion
         trajectory = PoseTrajectory(new, self.sweep_config.profile, joint_segments=joints)

@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from pickplace.errors import InvalidInputError, PlanError, require_positive
 from pickplace.geometry import rotation_log, rotation_vector_W
-from pickplace.planning.plan import Phases, Plan
+from pickplace.planning.plan import Plan
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory
 
 GRAVITY_W = np.array([0.0, 0.0, -9.81])
@@ -543,15 +543,7 @@ def retime(
     def moved(t: float) -> float:
         return new_times[_index_of(old_times, t)]
 
-    new_phases = None
-    if phases is not None:
-        new_phases = Phases(
-            approach=(moved(phases.approach[0]), moved(phases.approach[1])),
-            grip_closed=moved(phases.grip_closed),
-            transport=(moved(phases.transport[0]), moved(phases.transport[1])),
-            place_reached=moved(phases.place_reached),
-            release=moved(phases.release),
-        )
+    new_phases = None if phases is None else phases.mapped(moved)
     trajectory = PoseTrajectory(
         retimed, path_plan.trajectory.profile, laws, path_plan.trajectory.joint_segments
     )

@@ -462,16 +462,29 @@ class Reattempt:
                 f"m: {report.refusal()}",
             )
         assert report.chosen is not None
+        p = X_WO.translation()
+        return self._put_in_place(
+            run,
+            report,
+            taken,
+            f"plan '{{label}}' (candidate {report.chosen + 1} of {len(report.candidates)}) "
+            f"picks the brick where it rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m",
+        )
+
+    def _put_in_place(
+        self, run: RunControl, report: PlanningReport, taken: Failure, what: str
+    ) -> Failure | None:
+        """Replace the run's plan by ``report``'s chosen one from the next tick, as the next
+        attempt (its event text: ``what``, with ``{label}`` the candidate's label); give up
+        when the run's log would pass its memory bound."""
+        assert report.chosen is not None
         chosen = report.candidates[report.chosen]
         number = len(self._attempts) + 1
-        p = X_WO.translation()
         try:
             run.replace_plan(
                 report.plan,
                 run.ticks * run.dt,
-                f"attempt {number} of {self.max_attempts}: plan '{chosen.label}' (candidate "
-                f"{report.chosen + 1} of {len(report.candidates)}) picks the brick where it "
-                f"rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m",
+                f"attempt {number} of {self.max_attempts}: " + what.format(label=chosen.label),
             )
         except InvalidInputError as exc:  # the run's log would pass its memory bound
             return self._give_up(taken, str(exc))
@@ -502,23 +515,14 @@ class Reattempt:
                 taken,
                 f"no new plan carries the brick on from where the arm stopped: {report.refusal()}",
             )
-        assert report.chosen is not None
-        chosen = report.candidates[report.chosen]
-        number = len(self._attempts) + 1
         how = "around the world as it is now in C-space" if report.used_cspace else "straight on"
-        try:
-            run.replace_plan(
-                report.plan,
-                run.ticks * run.dt,
-                f"attempt {number} of {self.max_attempts}: plan '{chosen.label}' carries the "
-                f"brick on from where the arm stopped to the pre-place ({how}) and places it"
-                f"{moved}",
-            )
-        except InvalidInputError as exc:  # the run's log would pass its memory bound
-            return self._give_up(taken, str(exc))
-        self._attempts.append(Attempt(number, run.ticks, run.ticks * run.dt, chosen.label))
-        self._stop = self._taken = None
-        return None
+        return self._put_in_place(
+            run,
+            report,
+            taken,
+            "plan '{label}' carries the brick on from where the arm stopped to the pre-place "
+            f"({how}) and places it{moved}",
+        )
 
     def _held_elsewhere(
         self, run: RunControl, start: Start, X_WO: SE3, X_OG: SE3, report: PlanningReport
