@@ -335,11 +335,20 @@ def head_node() -> Iterator[tuple[int, int]]:
             proc.wait()
 
 
+# Ray's own client server sometimes fails to start a session's server on a fresh head (seen in
+# 1 CI run of 4 on 2 busy cores; its log was empty): a Ray fault, not this project's, retried
+# with a new head.
+RAY_CLIENT_SERVER_FLAKE = "Starting Ray client server failed"
+
+
 def test_a_ray_client_address_works_with_the_ray_extra(folder: Path) -> None:
     """``ray://`` failed with "requires ray[client]", which the extra did not install."""
-    with head_node() as (_, client):
-        sweep = Sweep(folder, "--trials", "3", "--address", f"ray://127.0.0.1:{client}")
-        code, out, err, _ = sweep.finish()
+    for _ in range(3):
+        with head_node() as (_, client):
+            sweep = Sweep(folder, "--trials", "3", "--address", f"ray://127.0.0.1:{client}")
+            code, out, err, _ = sweep.finish()
+        if RAY_CLIENT_SERVER_FLAKE not in err:
+            break
     assert code == 0, err
     assert err.strip() == ""
     report = one_json(out)
