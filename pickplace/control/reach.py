@@ -14,9 +14,10 @@ from collections.abc import Callable
 
 import mujoco
 import numpy as np
-from mink.lie import SE3, SO3
+from mink.lie import SE3
 
 from pickplace.errors import PlanError
+from pickplace.robot.ik import SiteIK
 
 REACHED = 1e-6
 """A pose counts as reached when the tool is within this of it, position [m] and orientation
@@ -28,7 +29,8 @@ _DAMPING = 1e-6  # λ² of the damped least squares [m², rad²]
 
 
 class ReachIK:
-    """Damped least-squares IK of the tool site on an arm-only model, within joint limits.
+    """Damped least-squares IK of the tool site on an arm-only model, within joint limits
+    (:class:`~pickplace.robot.ik.SiteIK` over every joint).
 
     Args:
         model: Arm-only model (every joint an arm joint, nq = nv).
@@ -42,23 +44,8 @@ class ReachIK:
     ) -> None:
         if model.nq != model.nv:
             raise PlanError(f"reach IK needs an arm-only model (nq = nv), got nq {model.nq}")
-        self.model = model
-        self.data = mujoco.MjData(model)
-        self.site_id = site_id
-        self.q_min = np.asarray(q_min, dtype=float)
-        self.q_max = np.asarray(q_max, dtype=float)
-        self._J = np.zeros((6, model.nv))
-
-    def error(self, q: np.ndarray, X_WG_target: SE3) -> np.ndarray:
-        """Tool error at ``q``: [p_target − p; log(R_target R⁻¹)] in world ([m], [rad])."""
-        d = self.data
-        d.qpos[:] = q
-        mujoco.mj_kinematics(self.model, d)
-        R_WG = SO3.from_matrix(d.site_xmat[self.site_id].reshape(3, 3))
-        e = np.empty(6)
-        e[:3] = X_WG_target.translation() - d.site_xpos[self.site_id]
-        e[3:] = (X_WG_target.rotation() @ R_WG.inverse()).log()
-        return e
+        every = np.arange(model.nv)
+        self.ik = SiteIK(model, site_id, every, every, q_min, q_max, _DAMPING, _MAX_STEP)
 
     def solve(self, X_WG_target: SE3, q0: np.ndarray) -> tuple[np.ndarray, float]:
         """IK from ``q0`` towards ``X_WG_target``.
@@ -66,23 +53,14 @@ class ReachIK:
         Returns:
             The joint positions reached [rad] and the norm of the remaining error.
         """
-        q = np.clip(np.asarray(q0, dtype=float), self.q_min, self.q_max)
-        eye = np.eye(6)
-        norm = np.inf
-        for _ in range(_MAX_ITERATIONS):
-            e = self.error(q, X_WG_target)
-            norm = float(np.linalg.norm(e))
-            if norm < REACHED:
-                break
-            mujoco.mj_comPos(self.model, self.data)
-            mujoco.mj_jacSite(self.model, self.data, self._J[:3], self._J[3:], self.site_id)
-            J = self._J
-            dq = J.T @ np.linalg.solve(J @ J.T + _DAMPING * eye, e)
-            step = float(np.abs(dq).max())
-            if step > _MAX_STEP:
-                dq *= _MAX_STEP / step
-            q = np.clip(q + dq, self.q_min, self.q_max)
-        return q, norm
+        q, e, _ = self.ik.solve(
+            X_WG_target.translation(),
+            X_WG_target.rotation().wxyz,
+            q0,
+            _MAX_ITERATIONS,
+            lambda e: bool(np.linalg.norm(e) < REACHED),
+        )
+        return q, float(np.linalg.norm(e))
 
 
 def farthest_reachable(

@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
+from pickplace.robot.ik import SiteIK
 
 _IK_DAMPING = 1e-3
 
@@ -57,7 +58,16 @@ def home_candidates(
     p_goal = data.site_xpos[target].copy()
     q_goal = np.zeros(4)
     mujoco.mju_mat2Quat(q_goal, data.site_xmat[target])
-    qadr, dadr = model.jnt_qposadr[joint_ids], model.jnt_dofadr[joint_ids]
+    ik = SiteIK(
+        model,
+        site,
+        model.jnt_qposadr[joint_ids],
+        model.jnt_dofadr[joint_ids],
+        q_min,
+        q_max,
+        _IK_DAMPING**2,
+        _IK_MAX_STEP,
+    )
     lo = np.where(np.isfinite(q_min), q_min, -np.pi)
     hi = np.where(np.isfinite(q_max), q_max, np.pi)
     mid = np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0)
@@ -65,34 +75,16 @@ def home_candidates(
     seeds = [mid] + [
         mid + rng.uniform(-0.25, 0.25, mid.shape) * (hi - lo) for _ in range(HOME_SEEDS - 1)
     ]
-    jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
-    eye = np.eye(6)
+
+    def on_pose(e: np.ndarray) -> bool:
+        return bool(np.linalg.norm(e[:3]) < 1e-4 and np.linalg.norm(e[3:]) < 1e-3)
+
     found: list[tuple[float, np.ndarray]] = []
     for seed in seeds:
-        q = seed.copy()
-        for _ in range(_IK_ITERATIONS):
-            data.qpos[qadr] = q
-            mujoco.mj_kinematics(model, data)
-            mujoco.mj_comPos(model, data)
-            quat = np.zeros(4)
-            mujoco.mju_mat2Quat(quat, data.site_xmat[site])
-            e_rot_local = np.zeros(3)
-            mujoco.mju_subQuat(e_rot_local, q_goal, quat)
-            e = np.concatenate(
-                [p_goal - data.site_xpos[site], data.site_xmat[site].reshape(3, 3) @ e_rot_local]
-            )
-            if np.linalg.norm(e[:3]) < 1e-4 and np.linalg.norm(e[3:]) < 1e-3:
-                if all(np.max(np.abs(q - other)) > HOME_DISTINCT for _, other in found):
-                    margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
-                    found.append((margin, q.copy()))
-                break
-            mujoco.mj_jacSite(model, data, jacp, jacr, site)
-            J = np.vstack([jacp[:, dadr], jacr[:, dadr]])
-            dq = J.T @ np.linalg.solve(J @ J.T + _IK_DAMPING**2 * eye, e)
-            step = float(np.max(np.abs(dq)))
-            if step > _IK_MAX_STEP:
-                dq *= _IK_MAX_STEP / step
-            q = np.clip(q + dq, q_min, q_max)
+        q, _, reached = ik.solve(p_goal, q_goal, seed, _IK_ITERATIONS, on_pose)
+        if reached and all(np.max(np.abs(q - other)) > HOME_DISTINCT for _, other in found):
+            margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
+            found.append((margin, q.copy()))
     if not found:
         raise RobotError(
             f"{src}: [arm] home: not given, and IK found no posture that puts the tool on the "
