@@ -254,3 +254,20 @@ def test_a_compared_sweep_is_recorded_per_arm(tmp_path: Path) -> None:
         assert any(n.startswith(f"world/trials/{arm}/") for n in ents)
     (text,) = ents["report"].static["TextDocument:text"]
     assert "controller=qp − controller=dls" in text
+
+
+def test_a_job_for_a_worker_that_died_is_not_an_error_but_its_death() -> None:
+    """Sending a job to a worker killed an instant earlier (its pipe closed) raised
+    BrokenPipeError out of the sweep (exit 1, no report); the send is let go, and the worker's
+    sentinel reports the job as worker-died."""
+    import multiprocessing as mp
+
+    from pickplace.sweep.sweep import _Worker
+
+    ctx = mp.get_context("fork")
+    worker = _Worker.__new__(_Worker)
+    worker.conn, child = ctx.Pipe()
+    child.close()  # the worker's end, as a killed worker leaves it
+    worker.give((0, 7))  # no exception
+    assert worker.job == (0, 7)
+    worker.conn.close()

@@ -472,9 +472,13 @@ class _Worker:
         self.give(job)
 
     def give(self, job: Job | None) -> None:
+        """Hand ``job`` (None: stop) to the worker. One killed meanwhile — before its first job,
+        or right after sending a result — has closed its end of the pipe: the send fails, and
+        its sentinel then reports it, the job it was given a ``worker-died`` trial."""
         self.job = job
         self.since = time.monotonic()
-        self.conn.send(job)
+        with contextlib.suppress(BrokenPipeError, ConnectionResetError):
+            self.conn.send(job)
 
     def exit_text(self) -> str:
         """How the dead worker ended: ``killed by signal N`` or ``exit N``."""
