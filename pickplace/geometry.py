@@ -233,3 +233,12 @@ def rotate_by_quat(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
     u = quat[..., 1:]
     t = 2.0 * cross3(u, v)
     return v + w * t + cross3(u, t)
+
+
+def top_down_rotation(yaw: float) -> SO3:
+    """Orientation ``R_WG = Rz(yaw) · Rx(π)`` of a gripper pointing straight down.
+
+    Args:
+        yaw: Gripper yaw [rad] (heading of G's x axis in the world xy plane).
+    """
+    return SO3.from_z_radians(yaw) @ SO3.from_x_radians(math.pi)

@@ -17,7 +17,7 @@ import pytest
 from pickplace.robot.registry import bundled_robots
 from pickplace.sim.scenarios import SCENARIOS
 from tests.conftest import REPO, CliRun, finished, one_json, run_cli_json, without_wall_time
-from tests.toy_robot import BAD_CASES, write_toy_robot
+from tests.toy_robot import BAD_CASES, TOY_TOO_FAR, write_toy_robot
 
 Cli = Callable[..., CliRun]
 
@@ -252,3 +252,18 @@ def test_run_plan_and_sweep_take_a_robot(cli: Cli) -> None:
     assert sweep.returncode == 0, sweep.stderr
     report = json.loads(sweep.stdout)
     assert report["robot"] == "panda-hand" and report["successes"] == 2
+
+
+@pytest.mark.slow  # the refused composition measures the reach by IK: 4 s
+def test_an_arm_that_cannot_reach_both_bins_is_refused_in_one_line(
+    cli: Cli, tmp_path: Path
+) -> None:
+    path = write_toy_robot(tmp_path, toml=TOY_TOO_FAR)
+    proc = cli("run", "--robot", str(path))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[0].startswith(f"pickplace: error: --robot: {path.resolve()}: [arm]: "), lines
+    for fragment in ("cannot reach both bins", "it lacks", "valid:", "base_pos"):
+        assert fragment in lines[0], lines[0]
+    assert proc.stdout == ""

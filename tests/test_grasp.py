@@ -9,11 +9,11 @@ import pytest
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError
+from pickplace.geometry import top_down_rotation
 from pickplace.planning.grasp import (
     choose_grasp,
     choose_place_pose,
     top_down_grasps,
-    top_down_rotation,
     wrap_angle,
     yaw_of,
 )

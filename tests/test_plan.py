@@ -10,8 +10,8 @@ import pytest
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError, UnknownNameError
-from pickplace.geometry import rotation_angle
-from pickplace.planning.grasp import choose_grasp, top_down_rotation
+from pickplace.geometry import rotation_angle, top_down_rotation
+from pickplace.planning.grasp import choose_grasp
 from pickplace.planning.plan import (
     Phases,
     PlanConfig,

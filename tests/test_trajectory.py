@@ -11,8 +11,7 @@ from mink.lie import SE3, SO3
 from scipy.spatial.transform import Rotation, Slerp
 
 from pickplace.errors import PlanError, UnknownNameError
-from pickplace.geometry import rotation_log, slerp
-from pickplace.planning.grasp import top_down_rotation
+from pickplace.geometry import rotation_log, slerp, top_down_rotation
 from pickplace.planning.plan import PlanConfig, plan_pick_place
 from pickplace.planning.trajectory import (
     PROFILES,

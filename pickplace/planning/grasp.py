@@ -13,7 +13,8 @@ symmetric under a rotation by π about O's z, which gives a second, equivalent g
 
 Gripper yaw (``yaw_of``) is the world-frame heading of G's x axis projected on the world xy
 plane, ``atan2(x_y, x_x)``. For a downward-pointing gripper this is the rotation about world z
-that the wrist has to perform, and ``top_down_rotation(yaw)`` has exactly that yaw.
+that the wrist has to perform, and :func:`pickplace.geometry.top_down_rotation` has exactly
+that yaw.
 """
 
 from __future__ import annotations
@@ -49,15 +50,6 @@ def yaw_of(R_WG: SO3) -> float:
     if math.hypot(x_x, x_y) > _HORIZONTAL_TOL:
         return math.atan2(x_y, x_x)
     return wrap_angle(math.atan2(float(M[1, 1]), float(M[0, 1])) + 0.5 * math.pi)
-
-
-def top_down_rotation(yaw: float) -> SO3:
-    """Orientation ``R_WG = Rz(yaw) · Rx(π)`` of a gripper pointing straight down.
-
-    Args:
-        yaw: Gripper yaw [rad] (heading of G's x axis in the world xy plane).
-    """
-    return SO3.from_z_radians(yaw) @ SO3.from_x_radians(math.pi)
 
 
 def top_down_grasps(grasp_height: float = 0.0) -> tuple[SE3, SE3]:

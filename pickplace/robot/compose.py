@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
-from pickplace.geometry import rotate_by_quat
+from pickplace.geometry import rotate_by_quat, top_down_rotation
 from pickplace.robot import calibration_cache
 from pickplace.robot.calibration import (
     GRIPPER_PREFIX,
@@ -37,6 +37,7 @@ from pickplace.robot.mjcf import load_part, parse_world
 from pickplace.robot.model import Composition, Robot
 from pickplace.robot.parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
 from pickplace.robot.physics import scale_squeeze, set_stiff_pad, unique_name
+from pickplace.robot.reach import ReachIK, shortfall
 from pickplace.robot.registry import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
 
 ARM_PREFIX = "arm/"
@@ -321,6 +322,69 @@ def compose(
 # --------------------------------------------------------------------------- the result
 
 
+BIN_BODIES = ("bin1", "bin2")
+"""The world's bins (``scenes/world.xml``): where the brick starts, where it must end."""
+
+_REACH_YAWS = 4
+"""Tool yaws, evenly over a half turn, at which the reach towards a bin is measured."""
+
+
+def _refuse_short_reach(
+    model: mujoco.MjModel,
+    joint_ids: np.ndarray,
+    tool_site: int,
+    q_min: np.ndarray,
+    q_max: np.ndarray,
+    bins: tuple[str, ...],
+    brick_geom: str,
+    src: str,
+) -> None:
+    """Refuse an arm that cannot bring the tool over a bin's centre.
+
+    For each bin, the tool pointing down with its point at the brick's centre height on the
+    bin's floor centre (where the nominal pick and place grip it) is sought by IK
+    (:func:`pickplace.robot.reach.shortfall`, yaws every 45°, seeds: the middle of the
+    joint ranges and the reference posture); the farthest bin the arm falls short of is named
+    with the distance it lacks.
+
+    Raises:
+        RobotError: A bin's centre is out of reach (one line: what the arm reaches, how far
+            the bin is, what it lacks, what would be valid).
+    """
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    p_W_axis = data.xanchor[joint_ids[0]].copy()
+    brick = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, brick_geom)
+    half_height = float(model.geom_size[brick][2]) if brick >= 0 else 0.0
+    lo = np.where(np.isfinite(q_min), q_min, -np.pi)
+    hi = np.where(np.isfinite(q_max), q_max, np.pi)
+    seeds = [
+        np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0),
+        model.qpos0[model.jnt_qposadr[joint_ids]],
+    ]
+    rotations = [top_down_rotation(k * np.pi / _REACH_YAWS) for k in range(_REACH_YAWS)]
+    ik = ReachIK(model, tool_site, q_min, q_max, joint_ids)
+    worst: tuple[float, float, str, float] | None = None
+    for name in bins:
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{name}_floor")
+        if body < 0 or floor < 0:
+            continue  # a world without this bin: the scene's own checks name it
+        p_target = data.xpos[body].copy()
+        p_target[2] = data.geom_xpos[floor][2] + model.geom_size[floor][2] + half_height
+        lack, distance = shortfall(ik, p_W_axis, p_target, rotations, seeds)
+        if lack > 0.0 and (worst is None or lack > worst[0]):
+            worst = (lack, distance, name, float(p_target[2]))
+    if worst is not None:
+        lack, distance, name, z = worst
+        raise RobotError(
+            f"{src}: [arm]: the arm cannot reach both bins: {name}'s centre is {distance:.3f} m "
+            f"from the arm's base axis and the tool, pointing down {z:.3f} m high, reaches "
+            f"{distance - lack:.3f} m towards it: it lacks {lack:.3f} m; valid: an arm that "
+            f"reaches both bins' centres, or [arm] base_pos nearer them"
+        )
+
+
 def _ids(model: mujoco.MjModel, obj: mujoco.mjtObj, names: tuple[str, ...]) -> np.ndarray:
     out = []
     for n in names:
@@ -364,6 +428,7 @@ def load_robot(
     home_width: float | None = None,
     brick_geom: str = BRICK_GEOM,
     pad_slots: int = PAD_SENSOR_SLOTS,
+    bins: tuple[str, ...] = BIN_BODIES,
 ) -> Composition:
     """Compose, calibrate and resolve a robot.
 
@@ -373,6 +438,7 @@ def load_robot(
         world: World MJCF file or spec; None: ``scenes/world.xml``.
         home_width: Gripper gap of the ``home`` keyframe [m]; None: the open width.
         brick_geom: The world's brick geom.
+        bins: The world's bin bodies, which the arm must reach (:func:`_refuse_short_reach`).
         pad_slots: Contacts each pad–brick sensor reports.
 
     Raises:
@@ -396,7 +462,11 @@ def load_robot(
         candidates = [np.array(desc.arm.home, dtype=float)]
         home_source = "description"
     else:
-        candidates = home_candidates(model, joint_ids, tool_site, q_min, q_max, src)
+        try:
+            candidates = home_candidates(model, joint_ids, tool_site, q_min, q_max, src)
+        except RobotError:
+            _refuse_short_reach(model, joint_ids, tool_site, q_min, q_max, bins, brick_geom, src)
+            raise
         home_source = "ik"
     q_home = candidates[0]
 

@@ -1,5 +1,5 @@
 """Damped least-squares IK of a site, within joint limits: the one solver behind the home
-postures (:mod:`pickplace.robot.home_ik`) and the arm's reach (:mod:`pickplace.control.reach`).
+postures (:mod:`pickplace.robot.home_ik`) and the arm's reach (:mod:`pickplace.robot.reach`).
 
 Each iteration loads q, measures the site's error to the goal — [p_goal − p; rotation vector of
 R_goal Rᵀ], in world ([m], [rad]) — stops when the caller's test says the goal is reached, and

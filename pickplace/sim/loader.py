@@ -113,7 +113,13 @@ def _compose(
     if spec.geom(names.brick_geom) is None:  # the gripper is calibrated on the brick's size
         raise UnknownNameError("geom", names.brick_geom, [g.name for g in spec.geoms if g.name])
     check_world(spec, path, names)  # the world's own problems, before the robot's
-    composition = load_robot(desc, spec, brick_geom=names.brick_geom, pad_slots=pad_slots)
+    composition = load_robot(
+        desc,
+        spec,
+        brick_geom=names.brick_geom,
+        pad_slots=pad_slots,
+        bins=(names.source_bin, names.target_bin),
+    )
     scene = build_scene(composition, path, names)
     robot = scene.robot
     q_home = robot.q_home

@@ -19,13 +19,14 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
-from pickplace.control.reach import ReachIK, farthest_reachable
 from pickplace.errors import PlanError, UnknownNameError
-from pickplace.planning.grasp import top_down_rotation, yaw_of
+from pickplace.geometry import top_down_rotation
+from pickplace.planning.grasp import yaw_of
 from pickplace.planning.plan import Plan, PlanConfig, Waypoint, for_gripper, time_keyframes
 from pickplace.planning.planner import PickPlacePlanner
 from pickplace.planning.timing import TimingConfig
 from pickplace.planning.trajectory import PoseTrajectory
+from pickplace.robot.reach import ReachIK, farthest_reachable
 from pickplace.sim import faults
 from pickplace.sim.catalog import CATALOG, ScenarioInfo
 from pickplace.sim.goals import PlaceGoal, ReachGoal
@@ -152,7 +153,7 @@ def full_stretch_distance(scene: Scene, z_tool: float) -> float:
     height ``z_tool`` [m] with its yaw as along the reach line, is reachable within the joint
     limits [m] (to 0.1 mm).
 
-    Found by IK (:func:`pickplace.control.reach.farthest_reachable`) between the line's near
+    Found by IK (:func:`pickplace.robot.reach.farthest_reachable`) between the line's near
     end and a bound no arm exceeds: the joint anchors' distances link to link plus the last
     anchor's to the tool.
 
