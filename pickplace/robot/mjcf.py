@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from pickplace.cache import read_json, write_json
 from pickplace.errors import RobotError, SceneError, file_problem
 
 if TYPE_CHECKING:
@@ -467,14 +468,24 @@ def load_part(path: Path, field: str, angle: str | None, source: Path | None = N
     repairs += _merge_repeated_assets(root, src, field)
     xml, spec, more = _parse_with_repairs(root, src, field)
     repairs += more
-    _check_compiles(spec, src, field)
-    return Part(
-        path=path,
-        field=field,
-        xml=xml,
-        repairs=tuple(repairs),
-        digest=_digest(used_angle, files),
-    )
+    digest = _digest(used_angle, files)
+    _compiles_once(spec, xml, digest, src, field)
+    return Part(path=path, field=field, xml=xml, repairs=tuple(repairs), digest=digest)
+
+
+def _compiles_once(spec: mujoco.MjSpec, xml: str, digest: str, source: Path, field: str) -> None:
+    """:func:`_check_compiles`, unless this very document (its sanitised XML, naming every
+    asset by path, and ``digest``, the content of every file it reads) compiled before with
+    this MuJoCo: remembered in the user's cache folder (:mod:`pickplace.cache`), since
+    compiling a published arm's meshes on its own takes most of a second, in every process."""
+    import mujoco
+
+    key = hashlib.sha256(f"{mujoco.__version__}\n{digest}\n{xml}".encode()).hexdigest()
+    name = f"compiles-{key}.json"
+    if read_json(name) is True:
+        return
+    _check_compiles(spec, source, field)
+    write_json(name, True)
 
 
 def parse_world(path: Path) -> mujoco.MjSpec:
