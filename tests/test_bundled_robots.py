@@ -21,7 +21,8 @@ import pytest
 from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
-from pickplace.planning.grasp import top_down_rotation, yaw_of
+from pickplace.geometry import top_down_rotation
+from pickplace.planning.grasp import yaw_of
 from pickplace.planning.home import choose_home
 from pickplace.planning.plan import PlanConfig
 from pickplace.robot.calibration import (
@@ -47,6 +48,14 @@ PINV_MEETS_A_JOINT_RANGE_FIRST = pytest.mark.xfail(
     strict=True,
     reason="on Menagerie's Panda, pinv at the singular reach runs a joint past its range "
     "before any joint exceeds its speed limit",
+)
+
+
+PASSIVE_2F85_SQUEEZES_WHEN_PUSHED = pytest.mark.xfail(
+    strict=True,
+    reason="Menagerie's 2F-85 with no actuator force on the UR5e: pushed onto the brick by the "
+    "tilted approach, its passive linkage closes to a 41 mm gap with 48 and 24 N on the pads, "
+    "so the grasp passes its check and the brick drops 90 ms into the lift (dropped)",
 )
 
 
@@ -136,7 +145,8 @@ def _reach_error(scene: Scene, target: SE3) -> float:
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_full_stretch_is_where_the_tool_pointing_down_stops_reaching(robot: str) -> None:
     """2 mm inside the computed full stretch the tool reaches its pose exactly; 2 mm outside
-    it falls short by about those 2 mm."""
+    it falls short by about those 2 mm (mink's IK, within the joint limits: 2.0 mm for most
+    arms, 2.7 mm for Menagerie's UR5e, whose joint limits bind there)."""
     scene = load_scene(robot=robot)
     r = full_stretch_distance(scene, REACH_HEIGHT)
     kin = ArmKinematics(scene)
@@ -155,7 +165,7 @@ def test_full_stretch_is_where_the_tool_pointing_down_stops_reaching(robot: str)
         for dr in (-0.002, 0.002)
     )
     assert inside < 1e-5
-    assert 0.0015 < outside < 0.0025
+    assert 0.0015 < outside < 0.003
 
 
 @pytest.mark.slow
@@ -205,8 +215,18 @@ def test_the_preflight_chooses_among_home_candidates(scene: Scene) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("robot", [r for r in ROBOTS if r != DEFAULT_ROBOT])
-@pytest.mark.parametrize("scenario", [s for s in SCENARIOS if s.startswith("fault-")])
+@pytest.mark.parametrize(
+    ("robot", "scenario"),
+    [
+        pytest.param(r, s, marks=PASSIVE_2F85_SQUEEZES_WHEN_PUSHED)
+        if (r, s) == ("menagerie-ur5e-2f85", "fault-gripper-disabled")
+        else (r, s)
+        for s in SCENARIOS
+        if s.startswith("fault-")
+        for r in ROBOTS
+        if r != DEFAULT_ROBOT
+    ],
+)
 def test_every_fault_has_its_documented_outcome_with_every_robot(robot: str, scenario: str) -> None:
     result = finished(scenario, robot=robot).result
     assert result.failure is not None

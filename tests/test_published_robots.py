@@ -48,8 +48,10 @@ speed_limits = [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]
 """
 
 
-def test_two_published_robots_are_bundled_with_their_licences() -> None:
-    assert {"menagerie-iiwa14-2f85", "menagerie-panda-hand"} <= set(PUBLISHED)
+def test_three_published_robots_are_bundled_with_their_licences() -> None:
+    assert {"menagerie-iiwa14-2f85", "menagerie-panda-hand", "menagerie-ur5e-2f85"} <= set(
+        PUBLISHED
+    )
     for model in MENAGERIE.iterdir():
         assert (model / "LICENSE").is_file(), model
     for robot in PUBLISHED:
