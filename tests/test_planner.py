@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 from mink.lie import SE3, SO3
 
+import pickplace.planning.planner as planner_module
 from pickplace.geometry import rotation_angle
 from pickplace.planning.candidates import (
     GRASP_OFFSET_FRACTIONS,
@@ -24,10 +26,17 @@ from pickplace.planning.plan import PlanConfig, plan_pick_place
 from pickplace.planning.planner import PickPlacePlanner
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.checks import FailureReason
+from pickplace.sim.loader import load_scene
 from pickplace.sim.task import World
-from pickplace.world.placements import BrickPlacement, brick_on_floor, target_placement
+from pickplace.world.placements import (
+    BrickPlacement,
+    brick_on_floor,
+    nominal_placement,
+    target_placement,
+)
 from pickplace.world.scene import Scene
 from tests.conftest import CliRun, finished
+from tests.toy_robot import TOY_TOML, write_toy_robot
 
 # A corner of bin 1 where no grasp fits: the brick against two walls, the WSG's 146 mm palm
 # over one of them whichever way it closes.
@@ -277,3 +286,27 @@ def test_a_scrape_after_planning_is_a_collision_not_a_success() -> None:
     assert s["max_robot_world_contact_force_n"] > 0
     failure = next(e for e in s["events"] if e["kind"] == "failure")
     assert "bin1_wall_ny" in failure["text"] and " N at t=" in failure["text"]
+
+
+@pytest.mark.parametrize("speed_limit", [0.6, 0.4])
+def test_a_sweep_that_outruns_slow_joints_is_swept_again_slower(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, speed_limit: float
+) -> None:
+    """The path sweep's constant speed (its tick spacing) is not the robot's: on an arm whose
+    joints turn at most ``speed_limit`` rad/s the IK falls behind it held by the limits; swept
+    again slower, the same candidate is feasible, and the timed plan keeps every joint within
+    its limit."""
+    toml = TOY_TOML.replace(
+        "speed_limits = [2.0, 2.0, 2.5, 3.0, 3.0, 3.0]", f"speed_limits = {[speed_limit] * 6}"
+    )
+    scene = load_scene(robot=write_toy_robot(tmp_path, toml=toml))
+    X_WO_pick = brick_on_floor(scene, nominal_placement(scene), scene.source_bin.floor_top_z)
+    X_WO_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    monkeypatch.setattr(planner_module, "SWEEP_SLOWDOWNS", 0)
+    once = PickPlacePlanner(scene, "qp").plan(X_WO_pick, X_WO_place)
+    problem = once.candidates[0].preflight.problem
+    assert not once.feasible and problem is not None and problem.lagging, problem
+    monkeypatch.undo()
+    again = PickPlacePlanner(scene, "qp").plan(X_WO_pick, X_WO_place)
+    assert again.feasible and again.chosen == 0
+    assert again.candidates[0].preflight.peak_speed_ratio <= 1.0

@@ -106,6 +106,10 @@ CLEARANCE_ABOVE_WALLS = 0.125
 # pre-flight ticks (for the collision checks and the joint path the timing works on).
 PATH_SPACING = 0.02
 PATH_ANGLE = 0.1
+SWEEP_SLOWDOWNS = 2
+"""Times a candidate's path sweep is run again at half its speed when the IK fell behind it
+held by a joint limit (the sweep's constant speed, set by its spacing, is not the robot's;
+the timing comes after it)."""
 _RZ_PI = np.diag([-1.0, -1.0, 1.0])  # a half turn about z
 
 
@@ -802,9 +806,21 @@ class PickPlacePlanner:
             held); or, when the path sweep fails, the swept plan, the sweep's result (its first
             problem is on the path, whatever the timing) and None.
         """
-        path = self.make_plan(X_WO_pick, X_WO_place, grasp, self.sweep_config, start)
         q_start = None if start is None else start.q
-        swept = self.preflight.run(path, X_WO_pick, X_WO_place, q_start=q_start)
+        sweep = self.sweep_config
+        for slower in range(SWEEP_SLOWDOWNS + 1):
+            path = self.make_plan(X_WO_pick, X_WO_place, grasp, sweep, start)
+            swept = self.preflight.run(path, X_WO_pick, X_WO_place, q_start=q_start)
+            problem = swept.problem
+            if problem is None or not problem.lagging or slower == SWEEP_SLOWDOWNS:
+                break
+            # The sweep outran the joints (its speed is the pre-flight's spacing, not the
+            # robot's): the same path again at half the speed, twice the ticks.
+            sweep = replace(
+                sweep,
+                max_linear_speed=0.5 * sweep.max_linear_speed,
+                max_angular_speed=0.5 * sweep.max_angular_speed,
+            )
         if not swept.feasible:
             return path, swept, None
         timed, warning = self.retimed(path, swept.times, swept.q)

@@ -124,12 +124,16 @@ class Problem:
         text: One line for a person: what, where, how much.
         point_W: Where it happened in world [m]: the contact point, or the limited joint's
             anchor, or the tool.
+        lagging: An ``"ik"`` problem of the commanded tool falling behind the plan while the
+            IK's step was held by a limit (status ``limited``): a path driven faster than the
+            robot's joints allow.
     """
 
     t: float
     kind: str
     text: str
     point_W: tuple[float, float, float]
+    lagging: bool = False
 
     def as_dict(self) -> dict[str, object]:
         """JSON form."""
@@ -363,7 +367,7 @@ class Preflight:
                     " (the robot's description gives no accel_limits, so motions start at full "
                     "speed: give them, or lower --speed)"
                 )
-            return Problem(t, "ik", text, (px, py, pz))
+            return Problem(t, "ik", text, (px, py, pz), res.status is IKStatus.LIMITED)
         if contact is not None and clearance < cfg.clearance:
             a, b, pos = contact
             text = (
