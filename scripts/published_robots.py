@@ -11,7 +11,8 @@ from the CLI in a fresh process, with a calibration cache of its own (a temporar
 * nominal: ``pickplace run --scenario pick-place``;
 * random seeds: ``pickplace sweep --scenario pick-place-random`` over ``--seeds``.
 
-    python -m scripts.published_robots --menagerie DIR [--seed 97000] [--trials 10] [--json]
+    python -m scripts.published_robots [--menagerie DIR] [--robosuite DIR] [--seed 97000]
+        [--trials 10] [--json]
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ class Combination:
         gripper: The gripper's MJCF file, alike.
         speed_limits: The ``[arm] speed_limits`` line's value [rad/s].
         gripper_lines: More ``[gripper]`` lines (e.g. ``squeeze_force``).
+        arm_lines: More ``[arm]`` lines (e.g. ``angle``).
     """
 
     name: str
@@ -60,6 +62,7 @@ class Combination:
     gripper: str
     speed_limits: str
     gripper_lines: tuple[str, ...] = ()
+    arm_lines: tuple[str, ...] = ()
 
     def toml(self, menagerie: Path) -> str:
         """The description, its files in ``menagerie``."""
@@ -68,6 +71,7 @@ class Combination:
             "[arm]",
             f'mjcf = "{menagerie / self.arm}"',
             f"speed_limits = {self.speed_limits}",
+            *self.arm_lines,
             "[gripper]",
             f'mjcf = "{menagerie / self.gripper}"',
             *self.gripper_lines,
@@ -94,7 +98,56 @@ COMBINATIONS = (
         ("mount_quat = [0.70710678, 0, 0.70710678, 0]  # the Z1 flange points along its x",),
     ),
 )
-"""The arm + gripper combinations measured, each written from the docs alone."""
+"""The Menagerie arm + gripper combinations measured, each written from the docs alone."""
+
+_RS = "robosuite/models/assets"
+_RADIAN = ('angle = "radian"  # robosuite\'s files have no <compiler angle>',)
+ROBOSUITE_COMBINATIONS = (
+    Combination(
+        "rs-panda-gripper",
+        f"{_RS}/robots/panda/robot.xml",
+        f"{_RS}/grippers/panda_gripper.xml",
+        _FRANKA,
+        _RADIAN,
+        _RADIAN,
+    ),
+    Combination(
+        "rs-sawyer-robotiq140",
+        f"{_RS}/robots/sawyer/robot.xml",
+        f"{_RS}/grippers/robotiq_gripper_140.xml",
+        _SAWYER,
+        _RADIAN,
+        _RADIAN,
+    ),
+    Combination(
+        "rs-xarm7-gripper",
+        f"{_RS}/robots/xarm7/robot.xml",
+        f"{_RS}/grippers/xarm7_gripper.xml",
+        _XARM7,
+        _RADIAN,
+        _RADIAN,
+    ),
+    Combination(
+        "rs-kinova3-robotiq140",
+        f"{_RS}/robots/kinova3/robot.xml",
+        f"{_RS}/grippers/robotiq_gripper_140.xml",
+        _GEN3,
+        _RADIAN,
+        _RADIAN,
+    ),
+    Combination(
+        "rs-iiwa-robotiq140",
+        f"{_RS}/robots/iiwa/robot.xml",
+        f"{_RS}/grippers/robotiq_gripper_140.xml",
+        _IIWA14,
+        _RADIAN,
+        _RADIAN,
+    ),
+)
+"""robosuite 1.5.2's arms with their own or a Robotiq gripper (its Robotiq 85 names a mesh
+its wheel does not ship, ``robotiq_arg2f_base_link_vis.stl``; the Rethink gripper opens 59 mm,
+too little for the brick) (files from its wheel:
+``pip download --no-deps robosuite==1.5.2``, unzipped)."""
 
 
 def _cli(*args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
@@ -159,16 +212,20 @@ def measure(combo: Combination, menagerie: Path, seed: int, trials: int) -> dict
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--menagerie", type=Path, required=True, help="a Menagerie checkout")
+    parser.add_argument("--menagerie", type=Path, help="a Menagerie checkout")
+    parser.add_argument("--robosuite", type=Path, help="robosuite's unzipped wheel")
     parser.add_argument("--seed", type=int, default=97000, help="first random seed")
     parser.add_argument("--trials", type=int, default=10, help="random seeds per robot")
     parser.add_argument("--only", nargs="*", default=None, help="combinations by name")
     parser.add_argument("--json", action="store_true", help="one JSON line per robot")
     args = parser.parse_args(argv)
-    for combo in COMBINATIONS:
+    groups = [(args.menagerie, COMBINATIONS), (args.robosuite, ROBOSUITE_COMBINATIONS)]
+    if args.menagerie is None and args.robosuite is None:
+        parser.error("--menagerie DIR or --robosuite DIR (or both) is needed")
+    for root, combo in ((r, c) for r, group in groups if r is not None for c in group):
         if args.only and combo.name not in args.only:
             continue
-        row = measure(combo, args.menagerie.resolve(), args.seed, args.trials)
+        row = measure(combo, root.resolve(), args.seed, args.trials)
         print(json.dumps(row) if args.json else row, flush=True)
     return 0
 
