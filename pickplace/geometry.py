@@ -242,3 +242,60 @@ def top_down_rotation(yaw: float) -> SO3:
         yaw: Gripper yaw [rad] (heading of G's x axis in the world xy plane).
     """
     return SO3.from_z_radians(yaw) @ SO3.from_x_radians(math.pi)
+
+
+def _axis_rotations() -> tuple[FloatArray, ...]:
+    """The 24 proper rotations that map the coordinate axes onto themselves (signed
+    permutation matrices of determinant 1)."""
+    out = []
+    for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
+        for signs in np.ndindex(2, 2, 2):
+            R = np.zeros((3, 3))
+            for col, (row, s) in enumerate(zip(perm, signs, strict=True)):
+                R[row, col] = -1.0 if s else 1.0
+            if np.linalg.det(R) > 0.0:
+                out.append(R)
+    return tuple(out)
+
+
+AXIS_ROTATIONS = _axis_rotations()
+"""The 24 rotations of a box frame onto itself, up to the box's sizes (identity first)."""
+
+
+def box_tilt(R_WO: SO3) -> float:
+    """Angle [rad] between world z and the nearest of a box frame O's six face normals: 0 for
+    a box lying flat on any face."""
+    M = R_WO.as_matrix()
+    return float(np.arccos(np.clip(np.abs(M[2, :]).max(), -1.0, 1.0)))
+
+
+def box_resting_frame(X_WO: SE3, half_extents: npt.ArrayLike) -> SE3 | None:
+    """The box's frame turned onto the face it rests on, when that turn maps the box onto
+    itself: ``X_WO · R`` with R one of :data:`AXIS_ROTATIONS` such that the box's sizes along
+    the turned axes are the same (a half turn about any axis; a quarter turn about an axis
+    across two equal sizes), chosen with its z axis nearest world z. A box lying on a face
+    that no such turn brings down (a 75 × 50 × 50 mm brick standing on its end) has none.
+
+    Args:
+        X_WO: The box's pose in world.
+        half_extents: Its half sizes along O's axes [m].
+
+    Returns:
+        The turned pose (``X_WO`` itself when its z is the nearest to world z), or None.
+    """
+    h = np.asarray(half_extents, dtype=float)
+    M = X_WO.rotation().as_matrix()
+    best: tuple[float, FloatArray] | None = None
+    for R in AXIS_ROTATIONS:
+        if not np.allclose(np.abs(R) @ h, h, rtol=0.0, atol=1e-9):
+            continue
+        up = float((M @ R)[2, 2])
+        if best is None or up > best[0] + 1e-12:
+            best = (up, R)
+    assert best is not None  # the identity always qualifies
+    up, R = best
+    if up < float(np.abs(M[2, :]).max()) - 1e-9:
+        return None  # another face is down, and no turn of the box's shape brings it there
+    if np.array_equal(R, np.eye(3)):
+        return X_WO
+    return X_WO @ SE3.from_rotation(SO3.from_matrix(R))

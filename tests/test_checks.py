@@ -171,20 +171,25 @@ def test_missed_grasp_text_gives_forces_with_the_digits_their_limit_needs() -> N
 
 
 def test_a_tilted_brick_in_the_target_bin_is_measured_against_its_limit(scene: Scene) -> None:
+    """Lying flat on any face is lying flat; 30 deg about x from a face is tilted 30 deg."""
     from pickplace.sim.checks import SuccessCriteria
     from pickplace.sim.verdict import placement_problems
 
-    data = scene.make_data()
     a = scene.brick_qpos_adr
     c = scene.target_bin.center_W
     half = scene.brick_half_extents
-    # On its side (90 deg about x), resting on the target bin's floor, still.
-    data.qpos[a : a + 3] = [c[0], c[1], scene.target_bin.floor_top_z + half[1]]
-    data.qpos[a + 3 : a + 7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]
-    data.qvel[:] = 0.0
-    mujoco.mj_forward(scene.model, data)
-    problems = placement_problems(scene, data, scene.target_bin, SuccessCriteria(), 0.0)
-    tilt = next(p for p in problems if "tilted" in p)
-    assert tilt == (
-        "the brick is tilted 90 deg from lying flat (its z axis from world z; limit 5 deg)"
-    )
+
+    def tilt_problems(angle_x: float) -> list[str]:
+        data = scene.make_data()
+        data.qpos[a : a + 3] = [c[0], c[1], scene.target_bin.floor_top_z + half[1]]
+        data.qpos[a + 3 : a + 7] = [np.cos(angle_x / 2), np.sin(angle_x / 2), 0.0, 0.0]
+        data.qvel[:] = 0.0
+        mujoco.mj_forward(scene.model, data)
+        problems = placement_problems(scene, data, scene.target_bin, SuccessCriteria(), 0.0)
+        return [p for p in problems if "tilted" in p]
+
+    assert tilt_problems(np.pi / 2) == [] and tilt_problems(np.pi) == []
+    assert tilt_problems(np.pi / 6) == [
+        "the brick is tilted 30 deg from lying flat (world z from its nearest face normal; "
+        "limit 5 deg)"
+    ]

@@ -12,7 +12,10 @@ from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError
 from pickplace.geometry import (
+    AXIS_ROTATIONS,
     box_corners,
+    box_resting_frame,
+    box_tilt,
     pose_error_W,
     pose_error_W_floats,
     quaternion_angle,
@@ -138,3 +141,28 @@ def test_require_pose_names_what_is_wrong() -> None:
         require_pose("X", SE3(np.array([2.0, 0, 0, 0, 0, 0, 0])))
     with pytest.raises(PlanError, match="X must be finite"):
         require_pose("X", SE3(np.array([1.0, 0, 0, 0, np.nan, 0, 0])))
+
+
+def test_a_brick_standing_on_its_end_has_no_resting_frame_and_on_any_other_face_one() -> None:
+    """Of the 24 turns of a 75 x 50 x 50 mm brick's frame, the 8 that keep its sizes (a half
+    turn about any axis, a quarter turn about x) leave it lying as planned for; the others
+    stand it on a 50 x 50 mm end, where the planner's box is not the brick."""
+    half = np.array([0.0375, 0.025, 0.025])
+    X_WO = SE3.from_rotation_and_translation(SO3.from_z_radians(0.7), np.array([0.1, -0.5, 0.035]))
+    corners = box_corners(half)
+    kept = 0
+    for R in AXIS_ROTATIONS:
+        lying = X_WO @ SE3.from_rotation(SO3.from_matrix(R))
+        frame = box_resting_frame(lying, half)
+        assert box_tilt(lying.rotation()) == pytest.approx(0.0, abs=1e-7)  # arccos near 1
+        if np.allclose(np.abs(R) @ half, half):
+            kept += 1
+            assert frame is not None
+            # The same box: its corners are the lying brick's, its z axis world z.
+            assert frame.rotation().as_matrix()[2, 2] == pytest.approx(1.0, abs=1e-9)
+            a = np.sort(transform_points(frame, corners).round(9), axis=0)
+            b = np.sort(transform_points(lying, corners).round(9), axis=0)
+            np.testing.assert_allclose(a, b, atol=1e-9)
+        elif abs(lying.rotation().as_matrix()[2, 0]) > 0.5:  # its 75 mm axis up
+            assert frame is None
+    assert kept == 8

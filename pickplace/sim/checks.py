@@ -81,7 +81,8 @@ class SuccessCriteria:
         rest_angular_speed: Brick angular speed below which it is at rest [rad/s].
         floor_tolerance: Largest gap between the brick's lowest corner and the bin floor's top
             face for the brick to be resting on it [m] (contacts penetrate < 1 mm).
-        max_tilt: Largest angle between the brick's z axis and world z for lying flat [rad].
+        max_tilt: Largest angle between world z and the brick's nearest face normal for lying
+            flat [rad].
         settle_time: Longest time simulated after the plan ends for the brick to come to
             rest [s].
         failure_grace: Time still simulated after a failure, so that its consequence can be

@@ -19,8 +19,10 @@ left, and then:
 
 A failure it does not take up ends the run as it would without it, with the same reason and
 text; so does a failure after the last attempt. When the brick does not come to rest in time,
-or it rests tilted from upright (the placement verdict wants its z axis up, and a top-down
-grasp does not turn it over), or no plan is feasible from where it lies, the run ends with the
+or it rests tilted, not flat on a face, or on a face that no turn of its lying shape puts
+down (:func:`~pickplace.geometry.box_resting_frame`: upside down, or on a side as tall as
+its height, it is the same box with its frame turned, and planned for that frame), or no
+plan is feasible from where it lies, the run ends with the
 failure that was taken up, at its tick, its text saying why it could not be recovered.
 
 Which failures are recoverable (:data:`RECOVERABLE`): ``missed-grasp`` and ``dropped``, where
@@ -53,7 +55,13 @@ from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, require_positive
-from pickplace.geometry import FloatArray, box_corners, transform_points
+from pickplace.geometry import (
+    FloatArray,
+    box_corners,
+    box_resting_frame,
+    box_tilt,
+    transform_points,
+)
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
@@ -442,15 +450,26 @@ class Reattempt:
                     taken, f"{why} {self.config.max_wait:g} s after the arm stopped"
                 )
             return None
-        X_WO = brick_pose(run.scene, run.data)
-        tilt = math.acos(min(1.0, max(-1.0, float(X_WO.rotation().as_matrix()[2, 2]))))
+        X_WO_lying = brick_pose(run.scene, run.data)
+        tilt = box_tilt(X_WO_lying.rotation())
         if tilt > run.criteria.max_tilt:
             return self._give_up(
                 taken,
-                f"the brick came to rest tilted {math.degrees(tilt):.0f} deg from upright (its z "
-                f"axis from world z; the placement needs at most "
-                f"{math.degrees(run.criteria.max_tilt):.0f} deg, and a top-down grasp does not "
-                "turn it over)",
+                f"the brick came to rest tilted {math.degrees(tilt):.0f} deg from lying flat "
+                f"(world z from its nearest face normal; at most "
+                f"{math.degrees(run.criteria.max_tilt):.0f} deg)",
+            )
+        # Upside down or on a side of the same size, the brick is the same box with its frame
+        # turned: the planner plans for that frame.
+        X_WO = box_resting_frame(X_WO_lying, run.scene.brick_half_extents)
+        if X_WO is None:
+            h = run.scene.brick_half_extents
+            tall = 2000.0 * float(np.abs(X_WO_lying.rotation().as_matrix()[2, :]) @ h)
+            return self._give_up(
+                taken,
+                f"the brick came to rest standing {tall:.0f} mm tall, on a face no turn of "
+                f"its {2000 * h[2]:.0f} mm tall lying shape puts down: the planner's grasps "
+                "are of that shape",
             )
         start = Start(run.q_cmd.copy(), stop.X_WG_rest)
         report = self.planner.plan(X_WO, self.X_WO_goal, start=start)

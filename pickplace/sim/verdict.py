@@ -17,7 +17,7 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.control.controllers import IK_STATUSES
-from pickplace.geometry import box_corners, transform_points
+from pickplace.geometry import box_corners, box_tilt, transform_points
 from pickplace.planning.planner import PlanningReport
 from pickplace.sim.checks import FailureReason, SuccessCriteria
 from pickplace.sim.events import Event, EventKind
@@ -66,9 +66,10 @@ def placement_problems(
     """Reasons the brick is not verifiably resting in ``bin_`` (empty if it is).
 
     The brick's box corners must lie over the bin's floor inside its inner walls, its lowest
-    corner on the floor's top face within ``floor_tolerance``, its z axis within ``max_tilt``
-    of vertical; it must be at rest, free of the gripper, and the gripper open wider than the
-    brick was between its fingers (``grasp_width`` [m]).
+    corner on the floor's top face within ``floor_tolerance``, lying flat on one of its faces
+    (world z within ``max_tilt`` of that face's normal: a brick put down on another face is
+    placed all the same); it must be at rest, free of the gripper, and the gripper open wider
+    than the brick was between its fingers (``grasp_width`` [m]).
     """
     X_WO = brick_pose(scene, data)
     corners_W = transform_points(X_WO, box_corners(scene.brick_half_extents))
@@ -85,12 +86,11 @@ def placement_problems(
             f"the brick's lowest corner is at z={lowest:.3f} m, {bin_.name}'s floor at "
             f"z={bin_.floor_top_z:.3f} m (tolerance {criteria.floor_tolerance * 1000:.0f} mm)"
         )
-    z_O = X_WO.rotation().as_matrix()[:, 2]
-    tilt = float(np.arccos(np.clip(z_O[2], -1.0, 1.0)))
+    tilt = box_tilt(X_WO.rotation())
     if tilt > criteria.max_tilt:
         problems.append(
-            f"the brick is tilted {np.rad2deg(tilt):.0f} deg from lying flat (its z axis from "
-            f"world z; limit {np.rad2deg(criteria.max_tilt):.0f} deg)"
+            f"the brick is tilted {np.rad2deg(tilt):.0f} deg from lying flat (world z from "
+            f"its nearest face normal; limit {np.rad2deg(criteria.max_tilt):.0f} deg)"
         )
     if not brick_at_rest(scene, data, criteria):
         a = scene.brick_dof_adr
