@@ -97,7 +97,7 @@ from pickplace.planning.preflight import (
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 from pickplace.planning.trajectory import JointSegment, PoseTrajectory
 from pickplace.signals import stop_point
-from pickplace.world.scene import Scene
+from pickplace.world.scene import BinGeometry, Scene
 
 # Clearance of the via-point above the higher bin wall: brick height hanging below the tool
 # (0.025 m half-height) plus 0.1 m of air [m].
@@ -714,9 +714,11 @@ class PickPlacePlanner:
         for width in np.unique(self._open_widths):
             sel = self._open_widths == width
             for R, p, bin_, w in (
-                (R_pick, p_pick, sc.source_bin, width),
-                (R_place, p_place, sc.target_bin, self.config.open_width),
+                (R_pick, p_pick, self.bin_at(X_WO_pick), width),
+                (R_place, p_place, self.bin_at(X_WO_place), self.config.open_width),
             ):
+                if bin_ is None:
+                    continue  # on the ground: the pre-flight checks the hand there
                 R_BW, p_BW = self._bin_frames[bin_.name]
                 d, _, _ = self.hand.distances(
                     np.einsum("ij,njk->nik", R_BW, R[sel]), p[sel] @ R_BW.T + p_BW, w, bin_
@@ -767,6 +769,15 @@ class PickPlacePlanner:
             out[0] = replace(out[0], problem=self._footprint_text(X_WO_pick, X_WO_place, out[0]))
         return out
 
+    def bin_at(self, X_WO: SE3) -> BinGeometry | None:
+        """The bin whose inner walls the brick's centre lies within (the source bin first),
+        or None: a brick on the ground beside the bins (after a drop)."""
+        p_WO = X_WO.translation()
+        for bin_ in (self.scene.source_bin, self.scene.target_bin):
+            if bin_.contains_xy(p_WO):
+                return bin_
+        return None
+
     def _footprint_text(self, X_WO_pick: SE3, X_WO_place: SE3, ranked: Ranked) -> str:
         """The cheap footprint problem of a candidate, in words."""
         g, clearance = ranked.grasp, self.preflight.config.clearance
@@ -776,9 +787,11 @@ class PickPlacePlanner:
             X_WO_place, g.X_OG, swung_pose(X_WG_pick, X_WO_place.translation(), base)
         )
         for what, X, bin_ in (
-            ("pick", X_WG_pick, self.scene.source_bin),
-            ("place", X_WG_place, self.scene.target_bin),
+            ("pick", X_WG_pick, self.bin_at(X_WO_pick)),
+            ("place", X_WG_place, self.bin_at(X_WO_place)),
         ):
+            if bin_ is None:
+                continue
             width = g.open_width if what == "pick" else self.config.open_width
             found = self.hand.problem(X, width, bin_, clearance)
             if found is not None:

@@ -12,6 +12,8 @@ scenario tables of README.md and docs/scenarios.md.
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
@@ -112,34 +114,46 @@ class HeavyBrick:
 
 
 class Knock:
-    """A 300 N downward blow on the brick for 0.02 s while it is carried.
+    """A blow that knocks the carried brick down out of the grip, halfway through the first
+    motion of the transport phase.
 
-    It lands halfway through the first motion of the plan's transport phase (the brick lifted,
-    on its way to the other bin); 300 N exceeds what friction at the pads can hold (80 N for
-    the iiwa's WSG-like gripper).
+    The blow is an impulse: the brick's downward speed jumps by ``FACTOR`` times the speed
+    the pads' friction can take out of it over its own height (the farthest it can slide and
+    still be between the pads): ``sqrt(2 · a · h)`` with ``a = μ · 2 · squeeze / m − g``
+    (the pads' friction coefficient, the gripper's measured squeeze per jaw, the brick's mass
+    and height). So it leaves the pads whatever the gripper, with ``sqrt(FACTOR² − 1)`` of
+    that speed, and falls from where it was carried.
     """
 
     name = "knock"
-    FORCE_W = np.array([0.0, 0.0, -300.0])
-    DURATION = 0.02
+    FACTOR = 1.1
 
     def __init__(self, scene: Scene) -> None:
-        self.body = scene.brick_body_id
+        robot = scene.robot
+        pads = np.concatenate(robot.pad_geom_ids)
+        mu = float(scene.model.geom_friction[pads, 0].min())
+        g = float(-scene.model.opt.gravity[2])
+        decel = mu * 2.0 * robot.measured_squeeze_force / scene.brick_mass - g
+        height = 2.0 * float(scene.brick_half_extents[2])
+        self.dv = self.FACTOR * math.sqrt(2.0 * max(decel, 0.0) * height)
+        self.dof = scene.brick_dof_adr
         self._t_hit: float | None = None
+        self._done = False
 
     def apply(self, world: World, tick: int) -> str | None:
+        if self._done:
+            return None
         if self._t_hit is None:
             phases = world.plan.phases
             if phases is None:
                 return None  # nothing is carried, nothing to knock
             start = phases.transport[0]
             self._t_hit = 0.5 * (start + world.plan.trajectory.next_keyframe_time(start))
-        t = tick * world.dt
-        active = self._t_hit <= t < self._t_hit + self.DURATION
-        world.data.xfrc_applied[self.body, :3] = self.FORCE_W if active else 0.0
-        if active and t - world.dt < self._t_hit:
-            return f"{-self.FORCE_W[2]:.0f} N downward blow on the brick for {self.DURATION} s"
-        return None
+        if tick * world.dt < self._t_hit:
+            return None
+        self._done = True
+        world.data.qvel[self.dof + 2] -= self.dv
+        return f"blow on the brick: {self.dv:.2f} m/s downward"
 
 
 class Obstacle:
