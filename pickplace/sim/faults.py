@@ -19,6 +19,7 @@ import numpy as np
 
 from pickplace.errors import InvalidInputError, SceneError
 from pickplace.sim.task import World
+from pickplace.sim.verdict import brick_touches_robot
 from pickplace.world.scene import Scene
 
 
@@ -114,34 +115,44 @@ class HeavyBrick:
 
 
 class Knock:
-    """A blow that knocks the carried brick down out of the grip, halfway through the first
+    """Blows that knock the carried brick down out of the grip, from halfway through the first
     motion of the transport phase.
 
-    The blow is an impulse: the brick's downward speed jumps by ``FACTOR`` times the speed
-    the pads' friction can take out of it over its own height (the farthest it can slide and
-    still be between the pads): ``sqrt(2 · a · h)`` with ``a = μ · 2 · squeeze / m − g``
-    (the pads' friction coefficient, the gripper's measured squeeze per jaw, the brick's mass
-    and height). So it leaves the pads whatever the gripper, with ``sqrt(FACTOR² − 1)`` of
-    that speed, and falls from where it was carried.
+    A blow is an impulse: the brick's downward speed jumps by ``FACTOR`` times the speed the
+    pads' friction would take out of it over its own height (the farthest it can slide and
+    still be between the pads), ``sqrt(2 · a · h)`` with ``a = μ · 2 · squeeze / m − g`` (the
+    pads' friction coefficient, the gripper's measured squeeze per jaw, the brick's mass and
+    height). Grips hold differently (slide jaws let the brick slip; a linkage carries it with
+    the hand, the arm taking the blow), so the blow comes again each tick while the brick
+    still touches the robot and no longer slides out (down, relative to the tool, at less
+    than half a blow's speed), at most ``MAX_BLOWS`` times: it leaves the pads at well under
+    one blow's speed, and falls from where it was carried.
     """
 
     name = "knock"
-    FACTOR = 1.1
+    FACTOR = 0.8
+    MAX_BLOWS = 20
 
     def __init__(self, scene: Scene) -> None:
-        robot = scene.robot
-        pads = np.concatenate(robot.pad_geom_ids)
-        mu = float(scene.model.geom_friction[pads, 0].min())
-        g = float(-scene.model.opt.gravity[2])
-        decel = mu * 2.0 * robot.measured_squeeze_force / scene.brick_mass - g
-        height = 2.0 * float(scene.brick_half_extents[2])
-        self.dv = self.FACTOR * math.sqrt(2.0 * max(decel, 0.0) * height)
+        self.scene = scene
         self.dof = scene.brick_dof_adr
+        self.site = scene.robot.tool_site_id
         self._t_hit: float | None = None
-        self._done = False
+        self._blows = 0
+        self.dv = 0.0
+
+    def _blow_speed(self, world: World) -> float:
+        """The blow's speed [m/s] from the world as it is (a varied mass or friction)."""
+        m, robot = world.model, self.scene.robot
+        pads = np.concatenate(robot.pad_geom_ids)
+        mu = float(m.geom_friction[pads, 0].min())
+        mass = float(m.body_mass[self.scene.brick_body_id])
+        decel = mu * 2.0 * robot.measured_squeeze_force / mass + float(m.opt.gravity[2])
+        height = 2.0 * float(self.scene.brick_half_extents[2])
+        return self.FACTOR * math.sqrt(2.0 * max(decel, 0.0) * height)
 
     def apply(self, world: World, tick: int) -> str | None:
-        if self._done:
+        if self._blows >= self.MAX_BLOWS:
             return None
         if self._t_hit is None:
             phases = world.plan.phases
@@ -151,9 +162,22 @@ class Knock:
             self._t_hit = 0.5 * (start + world.plan.trajectory.next_keyframe_time(start))
         if tick * world.dt < self._t_hit:
             return None
-        self._done = True
+        if self._blows:
+            if not brick_touches_robot(self.scene, world.data):
+                self._blows = self.MAX_BLOWS  # knocked out: no more blows
+                return None
+            v = np.zeros(6)
+            m, d = world.model, world.data
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self.site, v, 0)
+            if d.qvel[self.dof + 2] - v[5] < -0.5 * self.dv:
+                return None  # still sliding out from the last blow
+        if not self._blows:
+            self.dv = self._blow_speed(world)
+        self._blows += 1
         world.data.qvel[self.dof + 2] -= self.dv
-        return f"blow on the brick: {self.dv:.2f} m/s downward"
+        if self._blows == 1:
+            return f"blow on the brick: {self.dv:.2f} m/s downward, again each tick it is held"
+        return None
 
 
 class Obstacle:
