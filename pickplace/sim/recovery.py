@@ -53,13 +53,14 @@ from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, require_positive
-from pickplace.geometry import FloatArray, box_corners, transform_points
+from pickplace.geometry import FloatArray
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
 from pickplace.sim.checks import Failure, FailureReason
 from pickplace.sim.task import RunControl
 from pickplace.sim.verdict import Attempt, brick_at_rest, brick_pose, brick_touches_robot
+from pickplace.world.placements import footprint_inside
 
 RECOVERABLE: frozenset[FailureReason] = frozenset(
     {FailureReason.MISSED_GRASP, FailureReason.DROPPED}
@@ -550,12 +551,11 @@ class Reattempt:
             return None
         away /= norm
         scene, margin = run.scene, self.planner.preflight.config.clearance
-        corners = box_corners(scene.brick_half_extents)
         for shift in PLACE_SHIFTS:
             X_goal = SE3.from_rotation_and_translation(
                 self.X_WO_goal.rotation(), goal + shift * away
             )
-            if not scene.target_bin.contains_xy(transform_points(X_goal, corners), margin):
+            if not footprint_inside(scene, X_goal, scene.target_bin, margin):
                 return None
             moved = self.planner.plan_held(start, X_WO, X_goal, X_OG)
             if moved.feasible:

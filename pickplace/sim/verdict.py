@@ -22,6 +22,7 @@ from pickplace.planning.planner import PlanningReport
 from pickplace.sim.checks import FailureReason, SuccessCriteria
 from pickplace.sim.events import Event, EventKind
 from pickplace.sim.ticklog import TickLog
+from pickplace.world.placements import footprint_inside
 from pickplace.world.scene import BinGeometry, Scene
 
 # ------------------------------------------------------------------------ the brick
@@ -45,12 +46,12 @@ def brick_at_rest(scene: Scene, data: mujoco.MjData, criteria: SuccessCriteria) 
 
 def brick_touches_robot(scene: Scene, data: mujoco.MjData) -> bool:
     """True if any geom of the robot (arm or gripper) touches the brick."""
-    brick = scene.brick_geom_id
+    held = set(scene.object.geom_ids.tolist())
     for i in range(data.ncon):
         c = data.contact[i]
         g1, g2 = int(c.geom1), int(c.geom2)
-        if brick in (g1, g2):
-            other = g2 if g1 == brick else g1
+        if g1 in held or g2 in held:
+            other = g2 if g1 in held else g1
             if scene.is_robot_geom(other):
                 return True
     return False
@@ -65,21 +66,28 @@ def placement_problems(
 ) -> list[str]:
     """Reasons the brick is not verifiably resting in ``bin_`` (empty if it is).
 
-    The brick's box corners must lie over the bin's floor inside its inner walls, its lowest
-    corner on the floor's top face within ``floor_tolerance``, its z axis within ``max_tilt``
-    of vertical; it must be at rest, free of the gripper, and the gripper open wider than the
+    The object (the brick's box corners; another object's support along the walls' normals)
+    must lie over the bin's floor inside its inner walls, its lowest point on the floor's top
+    face within ``floor_tolerance``, its z axis within ``max_tilt`` of vertical (a ball any
+    way up); it must be at rest, free of the gripper, and the gripper open wider than the
     brick was between its fingers (``grasp_width`` [m]).
     """
     X_WO = brick_pose(scene, data)
-    corners_W = transform_points(X_WO, box_corners(scene.brick_half_extents))
+    box = scene.object.box_half_extents
+    if box is not None:
+        corners_W = transform_points(X_WO, box_corners(box))
+        lowest = float(corners_W[:, 2].min())
+        inside = bin_.contains_xy(corners_W)
+    else:  # another object: its support along the walls' normals and straight down
+        lowest = -float(scene.object.extent_W(X_WO, np.array([[0.0, 0.0, -1.0]]))[0])
+        inside = footprint_inside(scene, X_WO, bin_)
     problems: list[str] = []
-    if not bin_.contains_xy(corners_W):
+    if not inside:
         c = X_WO.translation()
         problems.append(
             f"the brick's footprint (centre at x={c[0]:.3f}, y={c[1]:.3f} m) is not inside "
             f"{bin_.name}'s inner walls"
         )
-    lowest = float(corners_W[:, 2].min())
     if abs(lowest - bin_.floor_top_z) > criteria.floor_tolerance:
         problems.append(
             f"the brick's lowest corner is at z={lowest:.3f} m, {bin_.name}'s floor at "
@@ -87,7 +95,7 @@ def placement_problems(
         )
     z_O = X_WO.rotation().as_matrix()[:, 2]
     tilt = float(np.arccos(np.clip(z_O[2], -1.0, 1.0)))
-    if tilt > criteria.max_tilt:
+    if tilt > criteria.max_tilt and not scene.object.is_round:  # a ball rests any way up
         problems.append(
             f"the brick is tilted {np.rad2deg(tilt):.0f} deg from lying flat (its z axis from "
             f"world z; limit {np.rad2deg(criteria.max_tilt):.0f} deg)"
