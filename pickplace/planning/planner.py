@@ -60,7 +60,7 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
-from pickplace.errors import PlanError, SceneError
+from pickplace.errors import ObjectError, PlanError
 from pickplace.geometry import pose_error_W_floats, require_pose
 from pickplace.planning.candidates import (
     GRAVITY,
@@ -395,6 +395,10 @@ class PickPlacePlanner:
         timing: How plans are timed by the robot's limits.
         seed: The run's seed: seeds the C-space planner's random numbers (with the attempt).
         cspace: Budget and resolution of C-space planning.
+
+    Raises:
+        ObjectError: The object has no grasp the gripper opens to (wider than its opening
+            less the pad clearance along every direction it could be grasped along).
     """
 
     def __init__(
@@ -473,7 +477,7 @@ class PickPlacePlanner:
         if not self._grasps:
             shape = scene.object
             narrowest = 2.0 * shape.min_footprint_half
-            raise SceneError(
+            raise ObjectError(
                 f"the object ({shape.kinds}) is at least {narrowest * 1000:.0f} mm across every "
                 f"horizontal direction it can be grasped along; the gripper opens to "
                 f"{self.config.open_width * 1000:.0f} mm; valid: an object at most "
