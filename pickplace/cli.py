@@ -146,6 +146,7 @@ def _add_task_options(p: argparse.ArgumentParser, vary_help: str) -> None:
         "--seed", type=_seed, default=0, help="seed of randomised scenarios (default: 0)"
     )
     p.add_argument("--brick", type=_brick, help="brick start X,Y,YAW in bin 1 [m, m, rad]")
+    _add_object(p)
     p.add_argument(
         "--speed",
         type=_finite_float,
@@ -256,6 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="IK rate [Hz] of every trial (default: 100; or --vary control_rate=a,b)",
     )
     _add_attempts(sweep)
+    _add_object(sweep)
     sweep.add_argument(
         "--backend",
         choices=("process", "ray"),
@@ -278,6 +280,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sweep.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     return parser
+
+
+OBJECT_HELP = (
+    "the object to pick instead of the world's brick: brick, can, ball, or an MJCF file "
+    "with one free body with collision geoms (placed where the brick lies; --brick places it)"
+)
+
+
+def _add_object(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--object", metavar="NAME|FILE.xml", help=OBJECT_HELP)
 
 
 def _add_attempts(parser: argparse.ArgumentParser) -> None:
@@ -327,6 +339,7 @@ OPTION_OF_FIELD = {
     "speed": "--speed",
     "address": "--address",
     "attempts": "--attempts",
+    "object": "--object",
 }
 
 
@@ -566,6 +579,7 @@ def _task_request(args: argparse.Namespace, **more: Any) -> RunRequest:
         robot=args.robot,
         speed=args.speed,
         parameters=_draw(args.vary, args.seed),
+        object=args.object,
         **more,
     )
 
@@ -734,6 +748,7 @@ def _cmd_sweep(args: argparse.Namespace, stop: InterruptHandler) -> int:
         robot=args.robot or DEFAULT_ROBOT,
         trial_timeout_s=args.trial_timeout,
         attempts=args.attempts,
+        object=args.object,
     )
     resolved = req.validate()
     output = None

@@ -42,6 +42,16 @@ class SceneError(PickPlaceError):
     field = "scene_path"
 
 
+class ObjectError(SceneError):
+    """The object to pick (``--object``) is unusable: its file cannot be read, it is not one
+    free body, it has no collision geom, or the gripper cannot open around it.
+
+    ``field`` is the input it is about: ``RunRequest.object``, ``--object``.
+    """
+
+    field = "object"
+
+
 class RobotError(PickPlaceError):
     """A robot description, or an arm or gripper file it names, is missing or unusable.
 

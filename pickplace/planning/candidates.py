@@ -1,12 +1,13 @@
-"""Grasp candidates from the object's box, and the cheap tests that rank them.
+"""Grasp candidates from the object's geometry, and the cheap tests that rank them.
 
 Frames: O the object (a box, origin at its centre, lying flat: O's z up), G the tool site
 (origin midway between the pads, +z the approach out of the gripper, fingers closing along
 G's y), W the world, B a bin's frame.
 
-Candidates (:func:`box_grasps`): the pads on two opposite faces of the box (antipodal: the
-faces' normals are the closing axis), for each pair of side faces whose width plus
-:data:`PAD_CLEARANCE` on each side the gripper opens to:
+Candidates of the brick (:func:`box_grasps`; any other object: :func:`object_grasps`, the
+same from its support patches at 12 closing directions): the pads on two opposite faces of
+the box (antipodal: the faces' normals are the closing axis), for each pair of side faces
+whose width plus :data:`PAD_CLEARANCE` on each side the gripper opens to:
 
 * the approach from straight down (``R_OG = Ry(π)`` across the width) tilted about the
   closing axis by each angle of :data:`GRASP_TILTS`, either way: a rotation about the face
@@ -34,6 +35,7 @@ import numpy.typing as npt
 from mink.lie import SE3, SO3
 
 from pickplace.robot.calibration import PAD_CLEARANCE
+from pickplace.world.objects import ObjectGeometry
 from pickplace.world.scene import BinGeometry
 
 GRASP_TILTS = (0.0, math.radians(15.0), math.radians(30.0))
@@ -137,6 +139,102 @@ def box_grasps(
                         offset,
                         turned,
                     )
+
+
+GRASP_YAWS = 12
+"""Closing directions tried around an object that is not the brick: this many, evenly over
+half a turn about O's z (the wrist turns give the other half)."""
+
+GRASP_HEIGHT_FRACTIONS = (0.0, 0.5)
+"""Offsets of the pads' centre up the object's side, as fractions of the largest that keeps
+the pad on the contact patch [-]: centred first, then higher (the fingertips farther from
+the floor)."""
+
+
+def object_grasps(
+    shape: ObjectGeometry,
+    max_open_width: float,
+    pad_half_size: tuple[float, float],
+    friction: float,
+    tilts: tuple[float, ...] = GRASP_TILTS,
+    offset_fractions: tuple[float, ...] = GRASP_OFFSET_FRACTIONS,
+) -> Iterator[GraspCandidate]:
+    """Antipodal grasps of the object from its geometry (the brick: :func:`box_grasps`).
+
+    For each closing direction ``d`` (G's y) horizontal in O at :data:`GRASP_YAWS` yaws, the
+    pads touch the object where its support along ``±d`` is reached (:meth:`~pickplace.
+    world.objects.ObjectGeometry.patch`: a face, a cylinder's side line, a sphere's point).
+    The grasp is antipodal when a line along ``d`` meets both patches (the squeeze needs no
+    friction), or else when the lateral gap between them over the width is at most half the
+    pads' friction coefficient (a friction cone with a safety factor of 2); the tool sits
+    midway between the patches, over their common part. Then, as for the box: every tilt
+    about ``d`` either way, offsets along the patch horizontally (fractions of the travel that
+    keeps the pad on it) and up it (:data:`GRASP_HEIGHT_FRACTIONS`), both wrist turns. The
+    opening is the width plus :data:`PAD_CLEARANCE` a side, and a direction whose opening
+    exceeds ``max_open_width`` is skipped.
+
+    Args:
+        shape: The object's geometry.
+        max_open_width: Widest gap the gripper opens to [m].
+        pad_half_size: Half sizes of a pad along G's x and G's z [m].
+        friction: The pads' friction coefficient [-].
+        tilts: Tilts from vertical [rad], each tried either way (0 once).
+        offset_fractions: Horizontal offsets as fractions of the largest on the patch.
+    """
+    box = shape.box_half_extents
+    if box is not None:
+        yield from box_grasps(box, max_open_width, pad_half_size[0], tilts, offset_fractions)
+        return
+    z_O = np.array([0.0, 0.0, 1.0])
+    signed_tilts = [0.0] + [s * t for t in tilts if t > 0.0 for s in (1.0, -1.0)]
+    for k in range(GRASP_YAWS):
+        yaw = math.pi * k / GRASP_YAWS
+        R_base = SO3.from_z_radians(yaw) @ SO3.from_y_radians(math.pi)
+        M = R_base.as_matrix()
+        x_O, d = M[:, 0], M[:, 1]  # G's x (horizontal, along the pads) and the closing axis
+        plus, minus = shape.support(d), shape.support(-d)
+        width = plus + minus
+        open_width = width + 2.0 * PAD_CLEARANCE
+        if open_width > max_open_width:
+            continue
+        spans = []
+        gap = 0.0
+        for axis in (x_O, z_O):
+            (c1, h1), (c2, h2) = shape.patch(d), shape.patch(-d)
+            lo1, hi1 = c1 @ axis - np.abs(axis) @ h1, c1 @ axis + np.abs(axis) @ h1
+            lo2, hi2 = c2 @ axis - np.abs(axis) @ h2, c2 @ axis + np.abs(axis) @ h2
+            lo, hi = max(lo1, lo2), min(hi1, hi2)
+            if lo <= hi + 1e-9:
+                spans.append((0.5 * (lo + hi), max(0.0, 0.5 * (hi - lo))))
+            else:
+                gap = math.hypot(gap, lo - hi)
+                spans.append((0.25 * (lo1 + hi1 + lo2 + hi2), 0.0))
+        if gap > 0.5 * friction * width:
+            continue  # not antipodal: the squeeze would need more friction than half the pads'
+        (m_x, half_x), (m_z, half_z) = spans
+        centre = 0.5 * (plus - minus) * d + m_x * x_O + m_z * z_O
+        travel_x = max(0.0, half_x - pad_half_size[0])
+        travel_z = max(0.0, half_z - pad_half_size[1])
+        name = f"across at {math.degrees(yaw):.0f}°"
+        for tilt in signed_tilts:
+            R_OG = R_base @ SO3.from_y_radians(tilt)
+            for fx in offset_fractions:
+                for fz in GRASP_HEIGHT_FRACTIONS:
+                    sx, sz = fx * travel_x, fz * travel_z
+                    if (fx and sx == 0.0) or (fz and sz == 0.0):
+                        continue
+                    X_OG = SE3.from_rotation_and_translation(R_OG, centre + sx * x_O + sz * z_O)
+                    label = _label(name, tilt, sx, False) + (
+                        f", {sz * 1000:.0f} mm up" if sz else ""
+                    )
+                    for turned in (False, True):
+                        X = (
+                            X_OG @ SE3.from_rotation(SO3.from_z_radians(math.pi))
+                            if turned
+                            else X_OG
+                        )
+                        text = label + (", turned 180°" if turned else "")
+                        yield GraspCandidate(text, X, width, open_width, tilt, sx, turned)
 
 
 def _label(name: str, tilt: float, offset: float, turned: bool) -> str:

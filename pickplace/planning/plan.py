@@ -25,7 +25,7 @@ from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError, require_finite, require_non_negative, require_positive
 from pickplace.geometry import require_pose, rotation_angle, rotation_log, slerp, wrap_angle
-from pickplace.planning.grasp import brick_width_across, choose_grasp, choose_place_pose
+from pickplace.planning.grasp import choose_grasp, choose_place_pose
 from pickplace.planning.trajectory import Keyframe, MotionProfile, PoseTrajectory, profile_by_name
 from pickplace.robot.calibration import GRASP_OPEN_WIDTH
 from pickplace.world.scene import Scene
@@ -486,4 +486,4 @@ def grasp_width(plan: Plan, scene: Scene) -> float:
     across its y axis when the plan grasps nothing)."""
     if plan.X_OG is None:
         return scene.brick_width
-    return brick_width_across(plan.X_OG, scene.brick_half_extents)
+    return scene.object.width_across(plan.X_OG)

@@ -60,13 +60,13 @@ import numpy as np
 from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
-from pickplace.errors import PlanError
+from pickplace.errors import ObjectError, PlanError
 from pickplace.geometry import pose_error_W_floats, require_pose
 from pickplace.planning.candidates import (
     GRAVITY,
     GraspCandidate,
     HandFootprint,
-    box_grasps,
+    object_grasps,
 )
 from pickplace.planning.cspace import (
     CSpaceConfig,
@@ -96,6 +96,7 @@ from pickplace.planning.preflight import (
 )
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 from pickplace.planning.trajectory import JointSegment, PoseTrajectory
+from pickplace.robot.calibration import PAD_CLEARANCE
 from pickplace.signals import stop_point
 from pickplace.world.scene import BinGeometry, Scene
 
@@ -398,6 +399,10 @@ class PickPlacePlanner:
         timing: How plans are timed by the robot's limits.
         seed: The run's seed: seeds the C-space planner's random numbers (with the attempt).
         cspace: Budget and resolution of C-space planning.
+
+    Raises:
+        ObjectError: The object has no grasp the gripper opens to (wider than its opening
+            less the pad clearance along every direction it could be grasped along).
     """
 
     def __init__(
@@ -468,8 +473,21 @@ class PickPlacePlanner:
         )
         pad_x = pad_hand.corners_G(self.config.open_width)[..., 0]
         self.pad_half_length = 0.5 * float(np.max(pad_x.max(axis=1) - pad_x.min(axis=1)))
+        pad_z = pad_hand.corners_G(self.config.open_width)[..., 2]
+        self.pad_half_height = 0.5 * float(np.max(pad_z.max(axis=1) - pad_z.min(axis=1)))
+        self.pad_friction = mu
         self.p_O_com = scene.model.body_ipos[scene.brick_body_id].copy()
         self._grasps = self.grasps()
+        if not self._grasps:
+            shape = scene.object
+            narrowest = 2.0 * shape.min_footprint_half
+            raise ObjectError(
+                f"the object ({shape.kinds}) is at least {narrowest * 1000:.0f} mm across every "
+                f"horizontal direction it can be grasped along; the gripper opens to "
+                f"{self.config.open_width * 1000:.0f} mm; valid: an object at most "
+                f"{(self.config.open_width - 2 * PAD_CLEARANCE) * 1000:.0f} mm across "
+                "(the opening less the pad clearance a side)"
+            )
         self._R_OG = np.array([g.X_OG.rotation().as_matrix() for g in self._grasps])
         self._p_OG = np.array([g.X_OG.translation() for g in self._grasps])
         self._open_widths = np.array([g.open_width for g in self._grasps])
@@ -496,7 +514,7 @@ class PickPlacePlanner:
         p_tool = d.site_xpos[robot.tool_site_id]
         geoms = robot.gripper_geom_ids
         hand = np.linalg.norm(d.geom_xpos[geoms] - p_tool, axis=1) + m.geom_rbound[geoms]
-        brick = float(np.linalg.norm(self.scene.brick_half_extents))
+        brick = self.scene.object.bounding_radius
         grasp = max(float(np.linalg.norm(p)) for p in self._p_OG)
         return float(max(hand.max(), grasp + brick))
 
@@ -805,7 +823,12 @@ class PickPlacePlanner:
     def grasps(self) -> list[GraspCandidate]:
         """The object's grasp candidates, in generation order (module docstring)."""
         return list(
-            box_grasps(self.scene.brick_half_extents, self.config.open_width, self.pad_half_length)
+            object_grasps(
+                self.scene.object,
+                self.config.open_width,
+                (self.pad_half_length, self.pad_half_height),
+                self.pad_friction,
+            )
         )
 
     def timed_plan(

@@ -478,16 +478,17 @@ class Preflight:
         kinds = np.zeros((ng, ng), dtype=np.int8)
         kinds[np.ix_(robot, world)] = 1
         kinds[np.ix_(world, robot)] = 1
-        brick = sc.brick_geom_id
-        kinds[brick, world] = 2
-        kinds[world, brick] = 2
+        held = sc.object.geom_ids
+        kinds[np.ix_(held, world)] = 2
+        kinds[np.ix_(world, held)] = 2
+        held_set = set(held.tolist())
         for X_WO in (X_WO_start, X_WO_end):
             self._load(sc.robot.q_home, 0.0, X_WO)
             d, n = self.data, self.data.ncon
             g1, g2 = d.contact.geom1[:n], d.contact.geom2[:n]
             near = d.contact.dist[:n] < self.config.clearance
             for a, b in zip(g1[near].tolist(), g2[near].tolist(), strict=True):
-                if brick in (a, b):
+                if a in held_set or b in held_set:
                     kinds[a, b] = kinds[b, a] = 0  # the brick rests against it
         return kinds
 
@@ -582,7 +583,7 @@ def collision_model(scene: Scene, detection_distance: float) -> mujoco.MjModel:
         if scene.is_robot_geom(g):
             bits = (_ROBOT_CONTYPE, _ROBOT_CONAFFINITY)
             model.geom_margin[g] = detection_distance
-        elif g == scene.brick_geom_id:
+        elif scene.is_object_geom(g):
             bits = (_BRICK_CONTYPE, _BRICK_CONAFFINITY)
             model.geom_margin[g] = detection_distance
         else:

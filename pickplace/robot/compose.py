@@ -202,15 +202,19 @@ def _compose(
     desc: RobotDescription,
     brick_geom: str,
     pad_slots: int = PAD_SENSOR_SLOTS,
+    held: HeldObject | None = None,
 ) -> _Composed:
     spec = _world_spec(world)
-    brick = spec.geom(brick_geom)
-    if brick is None or brick.type != mujoco.mjtGeom.mjGEOM_BOX:
-        raise RobotError(
-            f"the world has no box geom '{brick_geom}'; valid: a world with the brick as a box"
-        )
-    half = np.array(brick.size, dtype=float)
-    friction = np.array(brick.friction, dtype=float)
+    if held is None:
+        brick = spec.geom(brick_geom)
+        if brick is None or brick.type != mujoco.mjtGeom.mjGEOM_BOX:
+            raise RobotError(
+                f"the world has no box geom '{brick_geom}'; valid: a world with the brick as a box"
+            )
+        half = np.array(brick.size, dtype=float)
+        friction = np.array(brick.friction, dtype=float)
+    else:
+        half, friction = held.calibration_half.copy(), held.calibration_friction.copy()
     opt = spec.option
     options = CalibrationOptions(
         timestep=float(opt.timestep),
@@ -280,8 +284,8 @@ def _compose(
                 type=mujoco.mjtSensor.mjSENS_CONTACT,
                 objtype=mujoco.mjtObj.mjOBJ_GEOM,
                 objname=GRIPPER_PREFIX + pad,
-                reftype=mujoco.mjtObj.mjOBJ_GEOM,
-                refname=brick_geom,
+                reftype=mujoco.mjtObj.mjOBJ_GEOM if held is None else mujoco.mjtObj.mjOBJ_BODY,
+                refname=brick_geom if held is None else held.body,
                 intprm=[_CONTACT_DATA, _REDUCE_MAXFORCE, pad_slots],
             )
             names.append(name)
@@ -300,6 +304,22 @@ def _compose(
         pad_sensors=(sensors[0], sensors[1]),
         repairs=repairs,
     )
+
+
+@dataclass(frozen=True)
+class HeldObject:
+    """An object put in the brick's place (``--object``): the gripper is still calibrated on
+    the world's brick box, and its pad sensors see every geom of the object's body.
+
+    Attributes:
+        body: The object's body in the world.
+        calibration_half: Half sizes of the box the gripper is calibrated on [m].
+        calibration_friction: That box's friction coefficients.
+    """
+
+    body: str
+    calibration_half: np.ndarray
+    calibration_friction: np.ndarray
 
 
 def compose(
@@ -429,6 +449,7 @@ def load_robot(
     brick_geom: str = BRICK_GEOM,
     pad_slots: int = PAD_SENSOR_SLOTS,
     bins: tuple[str, ...] = BIN_BODIES,
+    held: HeldObject | None = None,
 ) -> Composition:
     """Compose, calibrate and resolve a robot.
 
@@ -440,13 +461,14 @@ def load_robot(
         brick_geom: The world's brick geom.
         bins: The world's bin bodies, which the arm must reach (:func:`_refuse_short_reach`).
         pad_slots: Contacts each pad–brick sensor reports.
+        held: Another object in the brick's place (None: the world's brick box).
 
     Raises:
         RobotError: See :func:`compose`; also no home posture could be found.
     """
     desc = resolve_description(robot)
     src = str(desc.source)
-    composed = _compose(world, desc, brick_geom, pad_slots)
+    composed = _compose(world, desc, brick_geom, pad_slots, held)
     spec, calib = composed.spec, composed.calibration
     spec.add_key(name=HOME_KEY)  # filled in once the home is known (Robot.write_home)
     arm_spec = spec.copy()  # before compiling: see Composition.arm_spec

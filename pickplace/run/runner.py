@@ -21,14 +21,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import mujoco
+import numpy as np
 
 from pickplace.control.controllers import CONTROLLERS, make_controller
-from pickplace.errors import InvalidInputError, UnknownNameError
+from pickplace.errors import InvalidInputError, ObjectError, SceneError, UnknownNameError
 from pickplace.outfile import lock_path, lock_problem, name_max
 from pickplace.planning.planner import Candidate, PlanningReport
 from pickplace.planning.preflight import Preflight, PreflightConfig
 from pickplace.planning.timing import TimingConfig, check_speed
 from pickplace.record.viewer import parse_viewer_url
+from pickplace.robot.compose import HeldObject
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
 from pickplace.sim.events import EventKind
@@ -40,8 +42,9 @@ from pickplace.sim.task import Task
 from pickplace.sim.variation import apply_to_task, apply_world
 from pickplace.sim.vary import ParameterDraw
 from pickplace.sim.verdict import RunResult
+from pickplace.world.objects import object_file, with_object
 from pickplace.world.placements import BrickPlacement, check_brick_in_source_bin
-from pickplace.world.scene import Scene, WorldFile, read_world
+from pickplace.world.scene import Scene, WorldFile, WorldNames, read_world
 
 if TYPE_CHECKING:
     from pickplace.record.recording import Recorder
@@ -80,6 +83,10 @@ class RunRequest:
             applied by :mod:`pickplace.sim.variation`; a drawn ``speed`` or ``control_rate``
             takes the place of :attr:`speed` or :attr:`control_rate_hz` (which must then be
             left at their defaults). Recorded as the summary's ``parameters``.
+        object: The object to pick instead of the world's brick: a bundled object's name
+            (:data:`~pickplace.world.objects.BUNDLED_OBJECTS`) or an MJCF file with one free
+            body (``--object``), put where the brick lies (:func:`~pickplace.world.objects.
+            with_object`); None or ``brick``: the world's own brick.
         attempts: Most attempts the run may take (1 to
             :data:`~pickplace.sim.recovery.MAX_ATTEMPTS`): after a missed grasp or a drop it
             stops the arm, waits for the brick to rest and plans again from there
@@ -100,6 +107,7 @@ class RunRequest:
     speed: float = 1.0
     parameters: ParameterDraw | None = None
     attempts: int = 1
+    object: str | None = None
     observers: Sequence[TickObserver] = field(default=(), compare=False)
 
     def recording_id(self, robot_name: str) -> str:
@@ -344,6 +352,8 @@ def validate_request(req: RunRequest) -> Scenario:
             f"{BRICK_YAW_LIMIT_RAD:.4f}] rad, got {req.brick.yaw:g}",
             field="brick",
         )
+    if req.object is not None:
+        object_file(req.object)
     if req.parameters is not None:
         _validate_parameters(req, req.parameters)
     if req.record is not None:
@@ -406,6 +416,7 @@ class ResolvedRun:
         world: The world file, read and parsed.
         robot: The robot's description, read and validated.
         control_rate_hz: The control rate [Hz]: a whole number of the world's physics steps.
+        held: The object in the brick's place (:func:`object_world`), None for the brick.
     """
 
     request: RunRequest
@@ -413,6 +424,7 @@ class ResolvedRun:
     world: WorldFile
     robot: RobotDescription
     control_rate_hz: float
+    held: HeldObject | None = None
 
 
 def resolve_request(req: RunRequest) -> ResolvedRun:
@@ -428,6 +440,7 @@ def resolve_request(req: RunRequest) -> ResolvedRun:
     # The world's timestep first: the robot is composed and calibrated at it.
     world = read_world(req.scene_path)
     check_timestep(req.scene_path, world.timestep)
+    world, held = object_world(world, req.object)
     drawn = req.parameters is not None and req.parameters.get("control_rate") is not None
     try:
         rate = resolve_control_rate(req.run_control_rate_hz, world.timestep)
@@ -435,7 +448,36 @@ def resolve_request(req: RunRequest) -> ResolvedRun:
         if not drawn:
             raise
         raise varied_rate_error(req.run_control_rate_hz, exc) from None
-    return ResolvedRun(req, scenario, world, resolve_description(req.robot), rate)
+    return ResolvedRun(req, scenario, world, resolve_description(req.robot), rate, held)
+
+
+def object_world(world: WorldFile, name: str | None) -> tuple[WorldFile, HeldObject | None]:
+    """The world with the object ``name`` (``--object``: a bundled name or an MJCF file) in
+    its brick's place, and what the robot's composition must know of it; ``world`` itself
+    and None for no object or ``brick``. The gripper stays calibrated on the world's brick
+    box; the world file's content, extended by the object file's, keys the scene cache.
+
+    Raises:
+        ObjectError: The object file is missing, unreadable, not one free body with
+            collision geoms (the message says what would be valid).
+        UnknownNameError: The world has no brick geom to calibrate the gripper on.
+    """
+    path = object_file(name) if name is not None else None
+    if path is None:
+        return world, None
+    names = WorldNames()
+    brick = world.spec.geom(names.brick_geom)
+    if brick is None:  # the gripper is calibrated on the brick's size
+        geoms = [g.name for g in world.spec.geoms if g.name]
+        raise UnknownNameError("geom", names.brick_geom, geoms)
+    held = HeldObject(
+        names.brick_body,
+        np.array(brick.size, dtype=np.float64),
+        np.array(brick.friction, dtype=np.float64),
+    )
+    spec = with_object(world.spec, names.brick_body, path)
+    content = world.content + b"\0--object\0" + str(path).encode() + b"\0" + path.read_bytes()
+    return WorldFile(world.path, content, spec), held
 
 
 def varied_rate_error(rate_hz: float, exc: InvalidInputError) -> InvalidInputError:
@@ -446,8 +488,18 @@ def varied_rate_error(rate_hz: float, exc: InvalidInputError) -> InvalidInputErr
 
 def _scene_and_task(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, Task]:
     """The scene and the scenario's task of a resolved request; see :func:`build_task`."""
+    try:
+        return _scene_and_task_of(run, refuse_infeasible)
+    except ObjectError as exc:
+        if run.held is not None:
+            raise
+        # The world's own brick (no --object): the world file's problem.
+        raise SceneError(f"scene file '{run.world.path}': {exc}") from None
+
+
+def _scene_and_task_of(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene, Task]:
     req, scenario = run.request, run.scenario
-    scene = load_scene(run.world, run.robot)
+    scene = load_scene(run.world, run.robot, held=run.held)
     # Before planning: the planner must know the obstacles and the brick.
     cell = scenario.world(scene, req.seed) if scenario.world is not None else None
     if req.parameters is not None or cell is not None:

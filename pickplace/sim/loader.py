@@ -37,7 +37,7 @@ from pickplace.cache import read_json, source_digest, write_json
 from pickplace.errors import UnknownNameError
 from pickplace.planning.home import choose_home
 from pickplace.planning.plan import DEFAULT_PLAN_CONFIG, for_gripper
-from pickplace.robot.compose import PAD_SENSOR_SLOTS, load_robot
+from pickplace.robot.compose import PAD_SENSOR_SLOTS, HeldObject, load_robot
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import (
     DEFAULT_ROBOT,
@@ -72,6 +72,7 @@ def load_scene(
     *,
     names: WorldNames | None = None,
     pad_slots: int = PAD_SENSOR_SLOTS,
+    held: HeldObject | None = None,
 ) -> Scene:
     """The world with the robot composed into it, its home chosen (see the module docstring).
 
@@ -82,6 +83,9 @@ def load_scene(
             ``robot.toml`` path, or a description.
         names: World names to resolve; default :class:`~pickplace.world.scene.WorldNames`.
         pad_slots: Contacts each pad–brick sensor reports.
+        held: The object that took the brick's place in ``world``
+            (:func:`~pickplace.world.objects.with_object`; its content is part of the
+            world file's), None for the world's own brick.
 
     Raises:
         SceneError: The world file is missing, not valid MJCF or structurally wrong.
@@ -93,11 +97,11 @@ def load_scene(
     desc = resolve_description(robot)
     names = names or WorldNames()
     key = hashlib.sha256(file.content)
-    for part in (str(file.path), description_digest(desc), repr(names), str(pad_slots)):
+    for part in (str(file.path), description_digest(desc), repr(names), str(pad_slots), repr(held)):
         key.update(part.encode())
     template = _SCENES.get(key.hexdigest())
     if template is None:
-        template = _compose(file.spec, file.path, desc, names, pad_slots, key.hexdigest())
+        template = _compose(file.spec, file.path, desc, names, pad_slots, key.hexdigest(), held)
         _SCENES[key.hexdigest()] = template
     return dataclasses.replace(template, model=copy.deepcopy(template.model))
 
@@ -109,8 +113,10 @@ def _compose(
     names: WorldNames,
     pad_slots: int,
     key: str,
+    held: HeldObject | None,
 ) -> Scene:
-    if spec.geom(names.brick_geom) is None:  # the gripper is calibrated on the brick's size
+    # The gripper is calibrated on the brick's size (an object in its place: on the world's).
+    if held is None and spec.geom(names.brick_geom) is None:
         raise UnknownNameError("geom", names.brick_geom, [g.name for g in spec.geoms if g.name])
     check_world(spec, path, names)  # the world's own problems, before the robot's
     composition = load_robot(
@@ -119,6 +125,7 @@ def _compose(
         brick_geom=names.brick_geom,
         pad_slots=pad_slots,
         bins=(names.source_bin, names.target_bin),
+        held=held,
     )
     scene = build_scene(composition, path, names)
     robot = scene.robot

@@ -55,19 +55,20 @@ from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, require_positive
-from pickplace.geometry import (
-    FloatArray,
-    box_corners,
-    box_resting_frame,
-    box_tilt,
-    transform_points,
-)
+from pickplace.geometry import FloatArray, box_resting_frame
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
 from pickplace.sim.checks import Failure, FailureReason
 from pickplace.sim.task import RunControl
-from pickplace.sim.verdict import Attempt, brick_at_rest, brick_pose, brick_touches_robot
+from pickplace.sim.verdict import (
+    Attempt,
+    brick_at_rest,
+    brick_pose,
+    brick_touches_robot,
+    lying_tilt,
+)
+from pickplace.world.placements import footprint_inside
 
 RECOVERABLE: frozenset[FailureReason] = frozenset(
     {FailureReason.MISSED_GRASP, FailureReason.DROPPED}
@@ -451,19 +452,20 @@ class Reattempt:
                 )
             return None
         X_WO_lying = brick_pose(run.scene, run.data)
-        tilt = box_tilt(X_WO_lying.rotation())
+        tilt = lying_tilt(run.scene, X_WO_lying)
         if tilt > run.criteria.max_tilt:
             return self._give_up(
                 taken,
                 f"the brick came to rest tilted {math.degrees(tilt):.0f} deg from lying flat "
-                f"(world z from its nearest face normal; at most "
-                f"{math.degrees(run.criteria.max_tilt):.0f} deg)",
+                f"(at most {math.degrees(run.criteria.max_tilt):.0f} deg)",
             )
         # Upside down or on a side of the same size, the brick is the same box with its frame
         # turned: the planner plans for that frame.
-        X_WO = box_resting_frame(X_WO_lying, run.scene.brick_half_extents)
+        box = run.scene.object.box_half_extents
+        X_WO = X_WO_lying if box is None else box_resting_frame(X_WO_lying, box)
         if X_WO is None:
-            h = run.scene.brick_half_extents
+            assert box is not None  # only a box has no resting frame
+            h = box
             tall = 2000.0 * float(np.abs(X_WO_lying.rotation().as_matrix()[2, :]) @ h)
             return self._give_up(
                 taken,
@@ -569,12 +571,11 @@ class Reattempt:
             return None
         away /= norm
         scene, margin = run.scene, self.planner.preflight.config.clearance
-        corners = box_corners(scene.brick_half_extents)
         for shift in PLACE_SHIFTS:
             X_goal = SE3.from_rotation_and_translation(
                 self.X_WO_goal.rotation(), goal + shift * away
             )
-            if not scene.target_bin.contains_xy(transform_points(X_goal, corners), margin):
+            if not footprint_inside(scene, X_goal, scene.target_bin, margin):
                 return None
             moved = self.planner.plan_held(start, X_WO, X_goal, X_OG)
             if moved.feasible:

@@ -56,6 +56,7 @@ from pickplace.sim.faults import BrickShifted
 from pickplace.sim.task import Task
 from pickplace.sim.vary import ParameterDraw, parameter_stream
 from pickplace.world.cell import ObstacleCell
+from pickplace.world.objects import ObjectGeometry
 from pickplace.world.obstacles import draw_boxes, with_obstacles
 from pickplace.world.scene import Scene
 
@@ -97,6 +98,13 @@ def apply_world(
     return scene if draw is None else apply_to_scene(scene, draw)
 
 
+def _box_object(shape: ObjectGeometry, half: np.ndarray) -> ObjectGeometry:
+    """The brick's geometry with its box's half sizes ``half`` [m]."""
+    if np.array_equal(half, shape.half_extents):
+        return shape
+    return ObjectGeometry((dataclasses.replace(shape.geoms[0], size=half.copy()),), shape.geom_ids)
+
+
 def apply_to_scene(scene: Scene, draw: ParameterDraw) -> Scene:
     """The scene with ``draw``'s scene parameters applied (see the module docstring).
 
@@ -111,13 +119,30 @@ def apply_to_scene(scene: Scene, draw: ParameterDraw) -> Scene:
     mass = float(model.body_mass[body])
     squeeze = scene.robot.squeeze_force
 
+    shape = scene.object
     size = draw.get("brick_size")
-    if size is not None:
+    if size is not None and shape.box_half_extents is not None:
         half = half * size
         model.geom_size[geom] = half
         model.geom_rbound[geom] = float(np.linalg.norm(half))
         model.geom_aabb[geom, 3:] = half
         model.body_inertia[body] *= size * size
+    elif size is not None:  # every geom of another object, about its origin
+        meshes = set()
+        for g in shape.geom_ids.tolist():
+            model.geom_size[g] *= size
+            model.geom_pos[g] *= size
+            model.geom_rbound[g] *= size
+            model.geom_aabb[g] *= size
+            if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+                meshes.add(int(model.geom_dataid[g]))
+        for m in meshes:
+            adr, n = int(model.mesh_vertadr[m]), int(model.mesh_vertnum[m])
+            model.mesh_vert[adr : adr + n] *= size
+        model.body_ipos[body] *= size
+        model.body_inertia[body] *= size * size
+        shape = ObjectGeometry.from_model(model, body)
+        half = shape.half_extents.copy()
     new_mass = draw.get("brick_mass")
     if new_mass is not None:
         model.body_inertia[body] *= new_mass / mass
@@ -144,6 +169,7 @@ def apply_to_scene(scene: Scene, draw: ParameterDraw) -> Scene:
         model=model,
         brick_half_extents=half,
         brick_mass=float(mass),
+        object=shape if shape.box_half_extents is None else _box_object(shape, half),
         robot=dataclasses.replace(scene.robot, squeeze_force=float(squeeze)),
     )
 
@@ -168,6 +194,8 @@ def brick_offset_W(scene: Scene, X_WO_start: SE3, offset_W: np.ndarray) -> np.nd
     # Half size of the brick's footprint along the bin's axes.
     reach_x = abs(math.cos(yaw_O)) * hx + abs(math.sin(yaw_O)) * hy
     reach_y = abs(math.sin(yaw_O)) * hx + abs(math.cos(yaw_O)) * hy
+    if scene.object.box_half_extents is None:  # another object: its own footprint
+        reach_x, reach_y = (float(v) for v in scene.object.footprint_half(yaw_O))
     room_x = max(float(bin_.inner_half_extents[0]) - reach_x, 0.0)
     room_y = max(float(bin_.inner_half_extents[1]) - reach_y, 0.0)
     dx, dy = float(offset_W[0]), float(offset_W[1])

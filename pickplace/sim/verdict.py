@@ -22,6 +22,7 @@ from pickplace.planning.planner import PlanningReport
 from pickplace.sim.checks import FailureReason, SuccessCriteria
 from pickplace.sim.events import Event, EventKind
 from pickplace.sim.ticklog import TickLog
+from pickplace.world.placements import footprint_inside
 from pickplace.world.scene import BinGeometry, Scene
 
 # ------------------------------------------------------------------------ the brick
@@ -45,15 +46,27 @@ def brick_at_rest(scene: Scene, data: mujoco.MjData, criteria: SuccessCriteria) 
 
 def brick_touches_robot(scene: Scene, data: mujoco.MjData) -> bool:
     """True if any geom of the robot (arm or gripper) touches the brick."""
-    brick = scene.brick_geom_id
+    held = set(scene.object.geom_ids.tolist())
     for i in range(data.ncon):
         c = data.contact[i]
         g1, g2 = int(c.geom1), int(c.geom2)
-        if brick in (g1, g2):
-            other = g2 if g1 == brick else g1
+        if g1 in held or g2 in held:
+            other = g2 if g1 in held else g1
             if scene.is_robot_geom(other):
                 return True
     return False
+
+
+def lying_tilt(scene: Scene, X_WO: SE3) -> float:
+    """How far the object is from lying flat [rad]: a box (the brick) from resting on any of
+    its faces (world z from the nearest face normal), a ball never, another object from
+    standing on its base (its z axis from world z)."""
+    if scene.object.box_half_extents is not None:
+        return box_tilt(X_WO.rotation())
+    if scene.object.is_round:
+        return 0.0
+    z_O = X_WO.rotation().as_matrix()[:, 2]
+    return float(np.arccos(np.clip(z_O[2], -1.0, 1.0)))
 
 
 def placement_problems(
@@ -65,28 +78,35 @@ def placement_problems(
 ) -> list[str]:
     """Reasons the brick is not verifiably resting in ``bin_`` (empty if it is).
 
-    The brick's box corners must lie over the bin's floor inside its inner walls, its lowest
-    corner on the floor's top face within ``floor_tolerance``, lying flat on one of its faces
-    (world z within ``max_tilt`` of that face's normal: a brick put down on another face is
-    placed all the same); it must be at rest, free of the gripper, and the gripper open wider
-    than the brick was between its fingers (``grasp_width`` [m]).
+    The object (the brick's box corners; another object's support along the walls' normals)
+    must lie over the bin's floor inside its inner walls, its lowest point on the floor's top
+    face within ``floor_tolerance``, lying flat (a box on any of its faces: world z within
+    ``max_tilt`` of that face's normal; another object with its z axis within ``max_tilt`` of
+    vertical; a ball any way up); it must be at rest, free of the gripper, and the gripper
+    open wider than the brick was between its fingers (``grasp_width`` [m]).
     """
     X_WO = brick_pose(scene, data)
-    corners_W = transform_points(X_WO, box_corners(scene.brick_half_extents))
+    box = scene.object.box_half_extents
+    if box is not None:
+        corners_W = transform_points(X_WO, box_corners(box))
+        lowest = float(corners_W[:, 2].min())
+        inside = bin_.contains_xy(corners_W)
+    else:  # another object: its support along the walls' normals and straight down
+        lowest = -float(scene.object.extent_W(X_WO, np.array([[0.0, 0.0, -1.0]]))[0])
+        inside = footprint_inside(scene, X_WO, bin_)
     problems: list[str] = []
-    if not bin_.contains_xy(corners_W):
+    if not inside:
         c = X_WO.translation()
         problems.append(
             f"the brick's footprint (centre at x={c[0]:.3f}, y={c[1]:.3f} m) is not inside "
             f"{bin_.name}'s inner walls"
         )
-    lowest = float(corners_W[:, 2].min())
     if abs(lowest - bin_.floor_top_z) > criteria.floor_tolerance:
         problems.append(
             f"the brick's lowest corner is at z={lowest:.3f} m, {bin_.name}'s floor at "
             f"z={bin_.floor_top_z:.3f} m (tolerance {criteria.floor_tolerance * 1000:.0f} mm)"
         )
-    tilt = box_tilt(X_WO.rotation())
+    tilt = lying_tilt(scene, X_WO)
     if tilt > criteria.max_tilt:
         problems.append(
             f"the brick is tilted {np.rad2deg(tilt):.0f} deg from lying flat (world z from "

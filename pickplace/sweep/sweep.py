@@ -51,6 +51,7 @@ from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
 from pickplace.run.runner import (
     MAX_SEED,
+    object_world,
     resolve_control_rate,
     validate_request,
     varied_rate_error,
@@ -175,6 +176,7 @@ class SweepRequest:
             docstring), in :data:`TRIAL_TIMEOUT_RANGE_S`; None: :data:`DEFAULT_TRIAL_TIMEOUT_S`.
             Not with the Ray backend (its tasks have no time limit yet).
         attempts: Most attempts each run may take (``--attempts``).
+        object: The object every trial picks (``--object``), None for the world's brick.
     """
 
     scenario: str = "pick-place-random"
@@ -191,6 +193,7 @@ class SweepRequest:
     robot: str = DEFAULT_ROBOT
     trial_timeout_s: float | None = None
     attempts: int = 1
+    object: str | None = None
 
     def specs(self) -> tuple[TrialSpec, ...]:
         """One trial spec per arm (one without a comparison), in the order of the values."""
@@ -202,6 +205,7 @@ class SweepRequest:
             self.vary,
             self.robot,
             self.attempts,
+            object=self.object,
         )
         if self.compare is None:
             return (base,)
@@ -277,6 +281,7 @@ class SweepRequest:
         if self.first_seed + self.trials - 1 > MAX_SEED:
             raise InvalidInputError(f"--seed + --trials - 1 must be <= {MAX_SEED}")
         self._validate_control_rates()
+        object_world(read_world(), self.object)  # a bad --object before any trial
         if self.workers is not None:
             remote = self.backend == "ray" and self.address is not None
             cpus = available_cpus()
@@ -352,8 +357,9 @@ def run_sweep(req: SweepRequest | ResolvedSweep, on_trial: Add | None = None) ->
     try:
         # Composed and calibrated once, here: forked workers inherit the cached scenes (and a
         # bad robot file is refused before any trial).
+        world, held = object_world(read_world(), req.object)
         for desc in resolved.robots.values():
-            load_scene(robot=desc)
+            load_scene(world, desc, held=held)
         if req.backend == "ray":
             workers, start_s = run_ray(specs, jobs, add, req.address, req.workers)
         elif workers == 1:

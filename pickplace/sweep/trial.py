@@ -71,6 +71,7 @@ class TrialSpec:
         attempts: Most attempts each run may take (``--attempts``, see
             :mod:`pickplace.sim.recovery`).
         arm: Label of the arm in a comparison, e.g. ``controller=dls`` ("" without one).
+        object: The object to pick (``--object``), None for the world's brick.
     """
 
     scenario: str = "pick-place-random"
@@ -81,6 +82,7 @@ class TrialSpec:
     robot: str = DEFAULT_ROBOT
     attempts: int = 1
     arm: str = ""
+    object: str | None = None
 
     def request(self, seed: int) -> RunRequest:
         """The run request of the trial with ``seed``."""
@@ -93,6 +95,7 @@ class TrialSpec:
             speed=self.speed,
             parameters=self.vary.draw(seed) if self.vary.specs else None,
             attempts=self.attempts,
+            object=self.object,
         )
 
     def rerun_command(self, seed: int) -> str:
@@ -107,6 +110,8 @@ class TrialSpec:
             args += ["--control-rate", repr(self.control_rate_hz)]
         if self.attempts != 1:
             args += ["--attempts", str(self.attempts)]
+        if self.object is not None:
+            args += ["--object", self.object]
         for spec in self.vary.specs:
             args += ["--vary", spec.flag()]
         return shlex.join(args)

@@ -11,7 +11,7 @@ from mink.lie import SE3, SO3
 
 from pickplace.errors import InvalidInputError
 from pickplace.geometry import box_corners, transform_points
-from pickplace.world.scene import Scene
+from pickplace.world.scene import BinGeometry, Scene
 
 
 def brick_pose(x: float, y: float, z: float, yaw: float) -> SE3:
@@ -39,7 +39,7 @@ class BrickPlacement:
 
 def brick_on_floor(scene: Scene, p: BrickPlacement, bin_floor_z: float) -> SE3:
     """Pose X_WO of the brick resting flat on a floor at height ``bin_floor_z`` [m]."""
-    return brick_pose(p.x, p.y, bin_floor_z + float(scene.brick_half_extents[2]), p.yaw)
+    return brick_pose(p.x, p.y, bin_floor_z + scene.object.rest_height, p.yaw)
 
 
 def check_brick_in_source_bin(scene: Scene, p: BrickPlacement) -> None:
@@ -54,16 +54,30 @@ def check_brick_in_source_bin(scene: Scene, p: BrickPlacement) -> None:
         raise InvalidInputError(f"{where}: the values must be finite numbers", field="brick")
     bin_ = scene.source_bin
     X_WO = brick_on_floor(scene, p, bin_.floor_top_z)
-    half = scene.brick_half_extents
-    if not bin_.contains_xy(transform_points(X_WO, box_corners([half[0], half[1], 0.0]))):
+    if not footprint_inside(scene, X_WO, scene.source_bin):
         c = bin_.center_W
         h = bin_.inner_half_extents
         raise InvalidInputError(
             f"{where} puts the brick outside {bin_.name}: its footprint must lie within the "
             f"inner walls, centre x in [{c[0] - h[0]:.2f}, {c[0] + h[0]:.2f}] and y in "
-            f"[{c[1] - h[1]:.2f}, {c[1] + h[1]:.2f}] m minus the brick's half-size",
+            f"[{c[1] - h[1]:.2f}, {c[1] + h[1]:.2f}] m minus the object's half-size at its yaw",
             field="brick",
         )
+
+
+def footprint_inside(scene: Scene, X_WO: SE3, bin_: BinGeometry, margin: float = 0.0) -> bool:
+    """True if the object's footprint at ``X_WO`` lies inside ``bin_``'s inner walls,
+    ``margin`` [m] inside them: the brick's box corners, another object's support along the
+    bin's four wall normals."""
+    box = scene.object.box_half_extents
+    if box is not None:
+        corners = box_corners([box[0], box[1], 0.0])
+        return bin_.contains_xy(transform_points(X_WO, corners), margin)
+    R_WB = bin_.X_WB.rotation().as_matrix()
+    normals = np.concatenate([R_WB[:, :2].T, -R_WB[:, :2].T])  # +x, +y, -x, -y of B in W
+    reach = scene.object.extent_W(X_WO, normals) - normals @ bin_.X_WB.translation()
+    limit = np.concatenate([bin_.inner_half_extents, bin_.inner_half_extents]) - margin
+    return bool(np.all(reach <= limit))
 
 
 def target_placement(scene: Scene) -> BrickPlacement:
@@ -78,9 +92,7 @@ def random_placement(scene: Scene, rng: np.random.Generator) -> BrickPlacement:
     bin_ = scene.source_bin
     yaw = float(rng.uniform(-math.pi, math.pi))
     yaw_B = yaw - yaw_of_bin(bin_.X_WB)
-    hx, hy = scene.brick_half_extents[:2]
-    c, s = abs(math.cos(yaw_B)), abs(math.sin(yaw_B))
-    half = bin_.inner_half_extents - np.array([c * hx + s * hy, s * hx + c * hy])
+    half = bin_.inner_half_extents - scene.object.footprint_half(yaw_B)
     u = rng.uniform(-half, half)
     p_W = bin_.X_WB.apply(np.array([u[0], u[1], 0.0]))
     return BrickPlacement(float(p_W[0]), float(p_W[1]), yaw)
@@ -97,7 +109,7 @@ def uniform_placement(scene: Scene, rng: np.random.Generator) -> BrickPlacement:
     leaves. Whether it can be picked is not asked.
     """
     bin_ = scene.source_bin
-    half = bin_.inner_half_extents - float(np.min(scene.brick_half_extents[:2]))
+    half = bin_.inner_half_extents - scene.object.min_footprint_half
     while True:
         u = rng.uniform(-half, half)
         yaw = float(rng.uniform(-math.pi, math.pi))

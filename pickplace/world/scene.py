@@ -27,6 +27,7 @@ from pickplace.robot.mjcf import file_stamps, parse_world
 from pickplace.robot.model import Composition, Robot
 from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from pickplace.robot.registry import DEFAULT_WORLD
+from pickplace.world.objects import ObjectGeometry
 
 if TYPE_CHECKING:
     from pickplace.world.cell import ObstacleCell
@@ -106,7 +107,9 @@ class WorldNames:
 
     Attributes:
         brick_body: The brick's body (with a free joint).
-        brick_geom: The brick's box geom (the gripper is calibrated on its size).
+        brick_geom: The brick's box geom (the gripper is calibrated on its size). The free
+            body's collision geoms (:class:`~pickplace.world.objects.ObjectGeometry`) are
+            what is grasped: this box, or another object put in its place (``--object``).
         source_bin: The bin the brick starts in: a body with a floor geom ``<bin>_floor`` and
             four box walls.
         target_bin: The bin it must end in, alike.
@@ -231,11 +234,13 @@ class Scene:
             [found, f_normal, f_t1, f_t2] (force on the pad in the contact frame [N]).
         pad_sensor_side: Per pad sensor, 0 for the +y side and 1 for the -y side.
         brick_body_id: Free body of the brick.
-        brick_geom_id: Box geom of the brick.
+        brick_geom_id: The object's first collision geom (the brick's box).
         brick_qpos_adr: First qpos address of the brick's free joint (xyz, wxyz).
         brick_dof_adr: First dof address of the brick's free joint.
-        brick_half_extents: Half sizes of the brick box [m].
+        brick_half_extents: Half sizes of the object's bounding box in O [m] (the brick's
+            box sizes).
         brick_mass: Mass of the brick [kg].
+        object: The free body's collision geometry, which every reader of its shape asks.
         source_bin: Bin the brick starts in.
         target_bin: Bin the brick must end in.
         robot_root_body_ids: The bodies under the world whose subtrees are the robot.
@@ -266,6 +271,7 @@ class Scene:
     brick_dof_adr: int
     brick_half_extents: np.ndarray
     brick_mass: float
+    object: ObjectGeometry
     source_bin: BinGeometry
     target_bin: BinGeometry
     robot_root_body_ids: np.ndarray
@@ -292,8 +298,14 @@ class Scene:
 
     @property
     def brick_width(self) -> float:
-        """Width of the brick across the fingers (its y extent) [m]."""
-        return 2.0 * float(self.brick_half_extents[1])
+        """Width of the object across the fingers along O's y [m]."""
+        if self.object.box_half_extents is not None:
+            return 2.0 * float(self.brick_half_extents[1])
+        return self.object.support([0.0, 1.0, 0.0]) + self.object.support([0.0, -1.0, 0.0])
+
+    def is_object_geom(self, geom_id: int) -> bool:
+        """True if geom ``geom_id`` is one of the held object's collision geoms."""
+        return bool(np.isin(geom_id, self.object.geom_ids))
 
     def is_robot_geom(self, geom_id: int) -> bool:
         """True if geom ``geom_id`` belongs to a body of the robot (arm or gripper)."""
@@ -433,18 +445,11 @@ def check_world(spec: mujoco.MjSpec, path: Path, names: WorldNames | None = None
             )
     obj = mujoco.mjtObj
     body = name_to_id(model, obj.mjOBJ_BODY, names.brick_body)
-    geom = name_to_id(model, obj.mjOBJ_GEOM, names.brick_geom)
     joint = int(model.body_jntadr[body])
     if joint < 0 or model.jnt_type[joint] != mujoco.mjtJoint.mjJNT_FREE:
         raise SceneError(
             f"scene file '{path}': brick body '{names.brick_body}' has no free joint; valid: a "
             "body with <freejoint/>"
-        )
-    if model.geom_type[geom] != mujoco.mjtGeom.mjGEOM_BOX:
-        kind = mujoco.mjtGeom(int(model.geom_type[geom])).name.removeprefix("mjGEOM_").lower()
-        raise SceneError(
-            f"scene file '{path}': brick geom '{names.brick_geom}' is a {kind}; valid: a box "
-            "(the gripper is calibrated on its size)"
         )
     lo, hi = BRICK_MASS_RANGE
     mass = float(model.body_mass[body])
@@ -453,17 +458,18 @@ def check_world(spec: mujoco.MjSpec, path: Path, names: WorldNames | None = None
             f"scene file '{path}': brick body '{names.brick_body}' has mass {mass:g} kg; "
             f"valid: [{lo:g}, {hi:g}] kg"
         )
-    half = model.geom_size[geom]
+    shape = ObjectGeometry.from_model(model, body)
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
     for bin_name in (names.source_bin, names.target_bin):
         inner = _bin_geometry(model, data, bin_name).inner_half_extents
-        fits = bool(np.all(half[:2] <= inner) or np.all(half[1::-1] <= inner))
+        half = shape.footprint_half(0.0)
+        fits = bool(np.all(half <= inner) or np.all(shape.footprint_half(0.5 * np.pi) <= inner))
         if not fits:
             raise SceneError(
-                f"scene file '{path}': brick geom '{names.brick_geom}' is "
+                f"scene file '{path}': the object '{names.brick_body}' is "
                 f"{2 * half[0]:g} x {2 * half[1]:g} m, larger than bin '{bin_name}' "
-                f"({2 * inner[0]:g} x {2 * inner[1]:g} m inside); valid: a brick whose "
+                f"({2 * inner[0]:g} x {2 * inner[1]:g} m inside); valid: an object whose "
                 "footprint fits in both bins"
             )
 
@@ -532,12 +538,10 @@ def build_scene(
     model = composition.model
     obj = mujoco.mjtObj
     brick_body = name_to_id(model, obj.mjOBJ_BODY, names.brick_body)
-    brick_geom = name_to_id(model, obj.mjOBJ_GEOM, names.brick_geom)
     brick_jnt = int(model.body_jntadr[brick_body])
     if brick_jnt < 0 or model.jnt_type[brick_jnt] != mujoco.mjtJoint.mjJNT_FREE:
         raise SceneError(f"brick body '{names.brick_body}' must have a free joint")
-    if model.geom_type[brick_geom] != mujoco.mjtGeom.mjGEOM_BOX:
-        raise SceneError(f"brick geom '{names.brick_geom}' must be a box")
+    shape = ObjectGeometry.from_model(model, brick_body)
     mask = np.zeros(model.nbody, dtype=bool)
     mask[robot.robot_body_ids] = True
     roots = np.unique(model.body_rootid[robot.robot_body_ids])
@@ -569,11 +573,12 @@ def build_scene(
         pad_force_sensor_adr=pad_adr,
         pad_sensor_side=pad_side,
         brick_body_id=brick_body,
-        brick_geom_id=brick_geom,
+        brick_geom_id=int(shape.geom_ids[0]),
         brick_qpos_adr=int(model.jnt_qposadr[brick_jnt]),
         brick_dof_adr=int(model.jnt_dofadr[brick_jnt]),
-        brick_half_extents=model.geom_size[brick_geom].copy(),
+        brick_half_extents=shape.half_extents.copy(),
         brick_mass=float(model.body_mass[brick_body]),
+        object=shape,
         source_bin=_bin_geometry(model, data, names.source_bin),
         target_bin=_bin_geometry(model, data, names.target_bin),
         robot_root_body_ids=roots,
