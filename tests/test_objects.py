@@ -335,3 +335,45 @@ def test_the_jar_file_is_what_its_script_writes_and_its_mesh_the_script_s_vertic
         atol=1e-6,
     )
     assert 2 * shape.half_extents[2] == pytest.approx(make_jar.HEIGHT, abs=1e-6)
+
+
+def _placed(scene: Scene, X_WO: SE3) -> mujoco.MjData:
+    """The scene's state with the object at ``X_WO`` at rest and the gripper at home."""
+    data = mujoco.MjData(scene.model)
+    mujoco.mj_resetDataKeyframe(scene.model, data, 0)
+    a = scene.brick_qpos_adr
+    data.qpos[a : a + 3] = X_WO.translation()
+    data.qpos[a + 3 : a + 7] = X_WO.rotation().wxyz
+    mujoco.mj_forward(scene.model, data)
+    return data
+
+
+@pytest.mark.parametrize("name", ["can", "ball"])
+def test_the_verdict_asks_the_object_s_own_geometry(name: str) -> None:
+    """Upright on bin 2's floor at its centre: placed. Moved until its side (not its centre)
+    crosses a wall: not inside. Lying on its side: the can is tilted, the ball rests any
+    way up."""
+    from pickplace.run.runner import build_task
+    from pickplace.sim.checks import SuccessCriteria
+    from pickplace.sim.verdict import placement_problems
+
+    scene, _ = build_task(RunRequest(object=name))
+    bin_, criteria, shape = scene.target_bin, SuccessCriteria(), scene.object
+    c = bin_.center_W
+    up = SE3.from_translation(np.array([c[0], c[1], bin_.floor_top_z + shape.rest_height]))
+    assert placement_problems(scene, _placed(scene, up), bin_, criteria, 0.0) == []
+    # Its centre 1 mm less than its radius from the +x wall of bin 2's frame: it crosses it.
+    x_B = bin_.X_WB.rotation().as_matrix()[:, 0]
+    reach = float(bin_.inner_half_extents[0]) - shape.support(x_B) + 1e-3
+    out = SE3.from_translation(up.translation() + reach * x_B)
+    problems = placement_problems(scene, _placed(scene, out), bin_, criteria, 0.0)
+    assert any("not inside" in p for p in problems)
+    inside = SE3.from_translation(up.translation() + (reach - 2e-3) * x_B)
+    assert placement_problems(scene, _placed(scene, inside), bin_, criteria, 0.0) == []
+    side = SE3.from_rotation_and_translation(
+        SO3.from_x_radians(math.pi / 2),
+        np.array([c[0], c[1], bin_.floor_top_z + shape.support([0.0, 1.0, 0.0])]),
+    )
+    tilted = [p for p in placement_problems(scene, _placed(scene, side), bin_, criteria, 0.0)]
+    assert (name == "can") == any("tilted" in p for p in tilted)
+    assert not any("lowest" in p for p in tilted)  # on the floor either way
