@@ -283,7 +283,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 OBJECT_HELP = (
-    "the object to pick instead of the world's brick: brick, can, ball, or an MJCF file "
+    "the object to pick instead of the world's brick: brick, can, ball, jar, or an MJCF file "
     "with one free body with collision geoms (placed where the brick lies; --brick places it)"
 )
 

@@ -14,9 +14,13 @@ import pytest
 from mink.lie import SE3, SO3
 
 from pickplace.errors import SceneError
+from pickplace.planning.candidates import GraspCandidate
+from pickplace.robot.calibration import PAD_CLEARANCE
 from pickplace.run.runner import RunRequest, run
 from pickplace.sweep.trial import TrialSpec
-from pickplace.world.objects import BUNDLED_OBJECTS, ObjectGeom, ObjectGeometry
+from pickplace.world.objects import BUNDLED_OBJECTS, OBJECTS_DIR, ObjectGeom, ObjectGeometry
+from pickplace.world.scene import Scene
+from scripts import make_jar
 from tests.conftest import CliRun
 
 Cli = Callable[..., CliRun]
@@ -259,8 +263,17 @@ def test_a_sweep_trial_s_rerun_command_names_its_object() -> None:
     assert spec.rerun_command(7).endswith("--seed 7 --object can")
 
 
-@pytest.mark.parametrize("name", ["can", "ball"])
-def test_the_object_rests_in_bin_1_where_the_brick_did(name: str) -> None:
+# Widths across any horizontal direction [m]: the can's and the ball's 60 mm; the jar, a
+# 24-sided polygon around a 32 mm radius, between its faces' and its corners' distances.
+WIDTHS = {
+    "can": (0.06, 0.06),
+    "ball": (0.06, 0.06),
+    "jar": (0.064 * math.cos(math.pi / 24), 0.064),
+}
+
+
+@pytest.mark.parametrize("name", sorted(WIDTHS))
+def test_the_object_rests_in_bin_1_and_is_grasped_across_its_width(name: str) -> None:
     from pickplace.run.runner import build_task
 
     scene, task = build_task(RunRequest(object=name))
@@ -270,14 +283,17 @@ def test_the_object_rests_in_bin_1_where_the_brick_did(name: str) -> None:
     lowest = -float(shape.extent_W(task.X_WO_start, np.array([[0.0, 0.0, -1.0]]))[0])
     assert lowest == pytest.approx(scene.source_bin.floor_top_z, abs=1e-9)
     assert task.planning is not None and task.planning.feasible
-    # The grasp opens only as wide as the object plus the clearance a side.
-    chosen = task.planning.candidates[task.planning.chosen or 0]
-    assert chosen.plan.X_OG is not None
-    assert shape.width_across(chosen.plan.X_OG) == pytest.approx(0.06)
+    lo, hi = WIDTHS[name]
+    grasps = object_grasps_of(scene)
+    assert grasps
+    for g in grasps:  # the opening is only as wide as the object plus the clearance a side
+        assert lo - 1e-6 <= g.width <= hi + 1e-6  # a mesh is stored in float32
+        assert g.open_width == pytest.approx(g.width + 2 * PAD_CLEARANCE)
+        assert shape.width_across(g.X_OG) == pytest.approx(g.width)
 
 
-@pytest.mark.parametrize("name", ["can", "ball"])
-def test_a_can_and_a_ball_are_picked_and_placed(name: str) -> None:
+@pytest.mark.parametrize("name", ["can", "ball", "jar"])
+def test_a_can_a_ball_and_a_jar_are_picked_and_placed(name: str) -> None:
     result = run(RunRequest(object=name))
     assert result.success, result.failure_text
     s = result.summary()
@@ -295,3 +311,69 @@ def test_a_user_s_object_of_several_geoms_is_picked_and_placed(tmp_path: Path) -
     )
     result = run(RunRequest(object=str(tmp_path / "part.xml")))
     assert result.success, result.failure_text
+
+
+def object_grasps_of(scene: Scene) -> list[GraspCandidate]:
+    """The planner's grasp candidates of the scene's object."""
+    from pickplace.planning.planner import PickPlacePlanner
+
+    return PickPlacePlanner(scene, "qp").grasps()
+
+
+def test_the_jar_file_is_what_its_script_writes_and_its_mesh_the_script_s_vertices() -> None:
+    assert make_jar.main([]) == 0  # scenes/objects/jar.xml is make_jar.py's output
+    model = mujoco.MjModel.from_xml_path(str(OBJECTS_DIR / "jar.xml"))
+    shape = ObjectGeometry.from_model(model, 1)
+    assert [g.kind for g in shape.geoms] == ["mesh"]
+    points = np.array(make_jar.vertices())
+    rng = np.random.default_rng(RNG_SEED + 3)
+    d = _directions(rng, 100)
+    # MuJoCo moves a mesh's vertices to its own frame: widths along any direction are kept.
+    np.testing.assert_allclose(
+        shape.supports(d) + shape.supports(-d),
+        (d @ points.T).max(axis=1) - (d @ points.T).min(axis=1),
+        atol=1e-6,
+    )
+    assert 2 * shape.half_extents[2] == pytest.approx(make_jar.HEIGHT, abs=1e-6)
+
+
+def _placed(scene: Scene, X_WO: SE3) -> mujoco.MjData:
+    """The scene's state with the object at ``X_WO`` at rest and the gripper at home."""
+    data = mujoco.MjData(scene.model)
+    mujoco.mj_resetDataKeyframe(scene.model, data, 0)
+    a = scene.brick_qpos_adr
+    data.qpos[a : a + 3] = X_WO.translation()
+    data.qpos[a + 3 : a + 7] = X_WO.rotation().wxyz
+    mujoco.mj_forward(scene.model, data)
+    return data
+
+
+@pytest.mark.parametrize("name", ["can", "ball"])
+def test_the_verdict_asks_the_object_s_own_geometry(name: str) -> None:
+    """Upright on bin 2's floor at its centre: placed. Moved until its side (not its centre)
+    crosses a wall: not inside. Lying on its side: the can is tilted, the ball rests any
+    way up."""
+    from pickplace.run.runner import build_task
+    from pickplace.sim.checks import SuccessCriteria
+    from pickplace.sim.verdict import placement_problems
+
+    scene, _ = build_task(RunRequest(object=name))
+    bin_, criteria, shape = scene.target_bin, SuccessCriteria(), scene.object
+    c = bin_.center_W
+    up = SE3.from_translation(np.array([c[0], c[1], bin_.floor_top_z + shape.rest_height]))
+    assert placement_problems(scene, _placed(scene, up), bin_, criteria, 0.0) == []
+    # Its centre 1 mm less than its radius from the +x wall of bin 2's frame: it crosses it.
+    x_B = bin_.X_WB.rotation().as_matrix()[:, 0]
+    reach = float(bin_.inner_half_extents[0]) - shape.support(x_B) + 1e-3
+    out = SE3.from_translation(up.translation() + reach * x_B)
+    problems = placement_problems(scene, _placed(scene, out), bin_, criteria, 0.0)
+    assert any("not inside" in p for p in problems)
+    inside = SE3.from_translation(up.translation() + (reach - 2e-3) * x_B)
+    assert placement_problems(scene, _placed(scene, inside), bin_, criteria, 0.0) == []
+    side = SE3.from_rotation_and_translation(
+        SO3.from_x_radians(math.pi / 2),
+        np.array([c[0], c[1], bin_.floor_top_z + shape.support([0.0, 1.0, 0.0])]),
+    )
+    tilted = [p for p in placement_problems(scene, _placed(scene, side), bin_, criteria, 0.0)]
+    assert (name == "can") == any("tilted" in p for p in tilted)
+    assert not any("lowest" in p for p in tilted)  # on the floor either way

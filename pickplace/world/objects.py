@@ -17,7 +17,8 @@ The brick (one box geom at the body's origin, axes aligned) keeps its box formul
 bit for bit (:attr:`ObjectGeometry.box_half_extents`).
 
 Bundled objects (:data:`BUNDLED_OBJECTS`): ``brick`` (the world's own), ``can`` (a cylinder
-60 mm across, 100 mm tall), ``ball`` (a sphere 60 mm across), files in ``scenes/objects/``.
+60 mm across, 100 mm tall), ``ball`` (a sphere 60 mm across), ``jar`` (a convex mesh 64 mm
+across, 72 mm tall, written by ``scripts/make_jar.py``), files in ``scenes/objects/``.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ __all__ = [
 OBJECTS_DIR = Path(__file__).resolve().parents[2] / "scenes" / "objects"
 """Where the bundled objects' MJCF files are."""
 
-BUNDLED_OBJECTS = ("brick", "can", "ball")
+BUNDLED_OBJECTS = ("brick", "can", "ball", "jar")
 """Names ``--object`` takes besides a file: ``brick`` is the world's own box."""
 
 SUPPORTED_GEOMS = {
