@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 
 from pickplace.cache import read_json, source_digest, write_json
-from pickplace.errors import UnknownNameError
+from pickplace.errors import SceneError, UnknownNameError
 from pickplace.planning.home import choose_home
 from pickplace.planning.plan import DEFAULT_PLAN_CONFIG, for_gripper
 from pickplace.robot.compose import PAD_SENSOR_SLOTS, HeldObject, load_robot
@@ -119,6 +119,13 @@ def _compose(
     if held is None and spec.geom(names.brick_geom) is None:
         raise UnknownNameError("geom", names.brick_geom, [g.name for g in spec.geoms if g.name])
     check_world(spec, path, names)  # the world's own problems, before the robot's
+    brick = spec.geom(names.brick_geom)
+    if held is None and brick.type != mujoco.mjtGeom.mjGEOM_BOX:
+        kind = mujoco.mjtGeom(int(brick.type)).name.removeprefix("mjGEOM_").lower()
+        raise SceneError(
+            f"scene file '{path}': brick geom '{names.brick_geom}' is a {kind}; valid: a box "
+            "(the gripper is calibrated on its size; another object goes in with --object)"
+        )
     composition = load_robot(
         desc,
         spec,
