@@ -47,6 +47,7 @@ from typing import Any
 
 from pickplace.control.controllers import CONTROLLERS
 from pickplace.errors import InvalidInputError, RobotError, UnknownNameError
+from pickplace.robot.compose import HeldObject
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import DEFAULT_ROBOT, resolve_description
 from pickplace.run.runner import (
@@ -76,7 +77,7 @@ from pickplace.sweep.trial import (
     lost_trial,
     run_trial,
 )
-from pickplace.world.scene import read_world
+from pickplace.world.scene import WorldFile, read_world
 
 MAX_TRIALS = 100_000
 # A trial's time limit [s]: a worker without a result by then is killed (worker-timeout). A
@@ -281,7 +282,7 @@ class SweepRequest:
         if self.first_seed + self.trials - 1 > MAX_SEED:
             raise InvalidInputError(f"--seed + --trials - 1 must be <= {MAX_SEED}")
         self._validate_control_rates()
-        object_world(read_world(), self.object)  # a bad --object before any trial
+        world, held = object_world(read_world(), self.object)  # a bad --object: no trial
         if self.workers is not None:
             remote = self.backend == "ray" and self.address is not None
             cpus = available_cpus()
@@ -293,7 +294,7 @@ class SweepRequest:
                 )
         if self.backend == "ray":
             check_ray(self.address)
-        return ResolvedSweep(self, robots)
+        return ResolvedSweep(self, robots, world, held)
 
     def _validate_control_rates(self) -> None:
         """Every control rate the trials use is a whole number of the scene's steps."""
@@ -320,10 +321,14 @@ class ResolvedSweep:
     Attributes:
         request: The sweep.
         robots: Each arm's robot as given (name or path) → its description.
+        world: The world file, with the sweep's object in the brick's place.
+        held: That object, as the robot's composition must know it (None: the brick).
     """
 
     request: SweepRequest
     robots: Mapping[str, RobotDescription]
+    world: WorldFile
+    held: HeldObject | None
 
 
 def jobs_of(req: SweepRequest) -> list[Job]:
@@ -357,9 +362,8 @@ def run_sweep(req: SweepRequest | ResolvedSweep, on_trial: Add | None = None) ->
     try:
         # Composed and calibrated once, here: forked workers inherit the cached scenes (and a
         # bad robot file is refused before any trial).
-        world, held = object_world(read_world(), req.object)
         for desc in resolved.robots.values():
-            load_scene(world, desc, held=held)
+            load_scene(resolved.world, desc, held=resolved.held)
         if req.backend == "ray":
             workers, start_s = run_ray(specs, jobs, add, req.address, req.workers)
         elif workers == 1:
