@@ -436,7 +436,7 @@ class PickPlacePlanner:
         )
         robot = scene.robot
         pads = np.concatenate(robot.pad_geom_ids)
-        mu = float(scene.model.geom_friction[pads, 0].min())  # the pads have contact priority
+        mu = robot.pad_friction(scene.model)
         # |a − g| the pads' friction holds on the brick: μ · 2 sides · squeeze force / mass.
         self.slip_accel = mu * 2.0 * robot.squeeze_force / scene.brick_mass
         kin = ArmKinematics(scene)
@@ -471,9 +471,9 @@ class PickPlacePlanner:
             robot.qpos_for_width,
             (robot.arm_qpos_adr, robot.q_home),
         )
-        pad_x = pad_hand.corners_G(self.config.open_width)[..., 0]
+        pad_corners = pad_hand.corners_G(self.config.open_width)
+        pad_x, pad_z = pad_corners[..., 0], pad_corners[..., 2]
         self.pad_half_length = 0.5 * float(np.max(pad_x.max(axis=1) - pad_x.min(axis=1)))
-        pad_z = pad_hand.corners_G(self.config.open_width)[..., 2]
         self.pad_half_height = 0.5 * float(np.max(pad_z.max(axis=1) - pad_z.min(axis=1)))
         self.pad_friction = mu
         self.p_O_com = scene.model.body_ipos[scene.brick_body_id].copy()

@@ -33,6 +33,7 @@ from pickplace.robot.calibration import (
 )
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.home_ik import home_candidates
+from pickplace.robot.ik import joint_ranges
 from pickplace.robot.mjcf import load_part, parse_world
 from pickplace.robot.model import Composition, Robot
 from pickplace.robot.parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
@@ -376,12 +377,7 @@ def _refuse_short_reach(
     p_W_axis = data.xanchor[joint_ids[0]].copy()
     brick = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, brick_geom)
     half_height = float(model.geom_size[brick][2]) if brick >= 0 else 0.0
-    lo = np.where(np.isfinite(q_min), q_min, -np.pi)
-    hi = np.where(np.isfinite(q_max), q_max, np.pi)
-    seeds = [
-        np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0),
-        model.qpos0[model.jnt_qposadr[joint_ids]],
-    ]
+    seeds = [joint_ranges(q_min, q_max)[2], model.qpos0[model.jnt_qposadr[joint_ids]]]
     rotations = [top_down_rotation(k * np.pi / _REACH_YAWS) for k in range(_REACH_YAWS)]
     ik = ReachIK(model, tool_site, q_min, q_max, joint_ids)
     worst: tuple[float, float, str, float] | None = None

@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
-from pickplace.robot.ik import SiteIK
+from pickplace.robot.ik import SiteIK, joint_ranges
 
 _IK_DAMPING = 1e-3
 
@@ -68,9 +68,7 @@ def home_candidates(
         _IK_DAMPING**2,
         _IK_MAX_STEP,
     )
-    lo = np.where(np.isfinite(q_min), q_min, -np.pi)
-    hi = np.where(np.isfinite(q_max), q_max, np.pi)
-    mid = np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0)
+    lo, hi, mid = joint_ranges(q_min, q_max)
     rng = np.random.default_rng(0)
     seeds = [mid] + [
         mid + rng.uniform(-0.25, 0.25, mid.shape) * (hi - lo) for _ in range(HOME_SEEDS - 1)

@@ -15,6 +15,19 @@ import mujoco
 import numpy as np
 
 
+def joint_ranges(q_min: np.ndarray, q_max: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint limits with a continuous joint's (±inf) taken as ±π, and the middle of each range
+    (0 for a continuous joint; a zero seed fails where 0 is outside a range) [rad or m]: the
+    IK's first seed.
+
+    Returns:
+        The lower and upper bounds and the middles, each of the joints' shape.
+    """
+    lo = np.where(np.isfinite(q_min), q_min, -np.pi)
+    hi = np.where(np.isfinite(q_max), q_max, np.pi)
+    return lo, hi, np.where(np.isfinite(q_min), 0.5 * (lo + hi), 0.0)
+
+
 class SiteIK:
     """Damped least-squares IK of one site over some of a model's joints.
 

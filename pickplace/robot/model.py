@@ -187,6 +187,12 @@ class Robot:
         """Current pad gap [m]."""
         return float(self.gap_from_body_poses(data.xpos, data.xquat))
 
+    def pad_friction(self, model: mujoco.MjModel) -> float:
+        """The sliding friction coefficient [-] where the pads touch what they hold: the pads'
+        own, the least of them (they have contact priority), as ``model`` has it now."""
+        pads = np.concatenate(self.pad_geom_ids)
+        return float(model.geom_friction[pads, 0].min())
+
     def pad_normal_forces(self, sensordata: np.ndarray) -> np.ndarray:
         """Normal force [N] of the brick on the +y and -y pads, shape (..., 2), from
         sensordata of shape (..., nsensordata)."""

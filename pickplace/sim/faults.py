@@ -144,8 +144,7 @@ class Knock:
     def _blow_speed(self, world: World) -> float:
         """The blow's speed [m/s] from the world as it is (a varied mass or friction)."""
         m, robot = world.model, self.scene.robot
-        pads = np.concatenate(robot.pad_geom_ids)
-        mu = float(m.geom_friction[pads, 0].min())
+        mu = robot.pad_friction(m)
         mass = float(m.body_mass[self.scene.brick_body_id])
         decel = mu * 2.0 * robot.measured_squeeze_force / mass + float(m.opt.gravity[2])
         height = 2.0 * float(self.scene.brick_half_extents[2])

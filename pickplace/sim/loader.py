@@ -116,10 +116,10 @@ def _compose(
     held: HeldObject | None,
 ) -> Scene:
     # The gripper is calibrated on the brick's size (an object in its place: on the world's).
-    if held is None and spec.geom(names.brick_geom) is None:
+    brick = spec.geom(names.brick_geom)
+    if held is None and brick is None:
         raise UnknownNameError("geom", names.brick_geom, [g.name for g in spec.geoms if g.name])
     check_world(spec, path, names)  # the world's own problems, before the robot's
-    brick = spec.geom(names.brick_geom)
     if held is None and brick.type != mujoco.mjtGeom.mjGEOM_BOX:
         kind = mujoco.mjtGeom(int(brick.type)).name.removeprefix("mjGEOM_").lower()
         raise SceneError(

@@ -465,12 +465,11 @@ class Reattempt:
         X_WO = X_WO_lying if box is None else box_resting_frame(X_WO_lying, box)
         if X_WO is None:
             assert box is not None  # only a box has no resting frame
-            h = box
-            tall = 2000.0 * float(np.abs(X_WO_lying.rotation().as_matrix()[2, :]) @ h)
+            tall = 2000.0 * float(np.abs(X_WO_lying.rotation().as_matrix()[2, :]) @ box)
             return self._give_up(
                 taken,
                 f"the brick came to rest standing {tall:.0f} mm tall, on a face no turn of "
-                f"its {2000 * h[2]:.0f} mm tall lying shape puts down: the planner's grasps "
+                f"its {2000 * box[2]:.0f} mm tall lying shape puts down: the planner's grasps "
                 "are of that shape",
             )
         start = Start(run.q_cmd.copy(), stop.X_WG_rest)
