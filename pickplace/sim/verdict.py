@@ -108,9 +108,12 @@ def placement_problems(
         )
     tilt = lying_tilt(scene, X_WO)
     if tilt > criteria.max_tilt:
+        measured = (
+            "world z from its nearest face normal" if box is not None else "its z axis from world z"
+        )
         problems.append(
-            f"the brick is tilted {np.rad2deg(tilt):.0f} deg from lying flat (world z from "
-            f"its nearest face normal; limit {np.rad2deg(criteria.max_tilt):.0f} deg)"
+            f"the brick is tilted {np.rad2deg(tilt):.0f} deg from lying flat ({measured}; "
+            f"limit {np.rad2deg(criteria.max_tilt):.0f} deg)"
         )
     if not brick_at_rest(scene, data, criteria):
         a = scene.brick_dof_adr
