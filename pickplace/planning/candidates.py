@@ -199,8 +199,8 @@ def object_grasps(
             continue
         spans = []
         gap = 0.0
+        (c1, h1), (c2, h2) = shape.patch(d), shape.patch(-d)
         for axis in (x_O, z_O):
-            (c1, h1), (c2, h2) = shape.patch(d), shape.patch(-d)
             lo1, hi1 = c1 @ axis - np.abs(axis) @ h1, c1 @ axis + np.abs(axis) @ h1
             lo2, hi2 = c2 @ axis - np.abs(axis) @ h2, c2 @ axis + np.abs(axis) @ h2
             lo, hi = max(lo1, lo2), min(hi1, hi2)
