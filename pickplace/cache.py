@@ -49,6 +49,26 @@ def source_digest(modules: Iterable[str]) -> str:
     return digest.hexdigest()
 
 
+_FILE_DIGESTS: dict[Path, tuple[tuple[int, int], str]] = {}
+
+
+def file_digest(path: Path) -> str | None:
+    """SHA-256 of a file's content, or None if it cannot be read. Remembered per process with
+    the file's modification time [ns] and size: asked again while neither changed, the file is
+    not read again (a published arm's meshes are tens of MB)."""
+    try:
+        st = path.stat()
+        stamp = (st.st_mtime_ns, st.st_size)
+        known = _FILE_DIGESTS.get(path)
+        if known is not None and known[0] == stamp:
+            return known[1]
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
+    _FILE_DIGESTS[path] = (stamp, digest)
+    return digest
+
+
 def read_json(name: str) -> Any | None:
     """The JSON value kept as ``name`` in the cache folder, or None (absent or unreadable)."""
     try:

@@ -16,6 +16,8 @@ and overwritten).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 from typing import Any
 
 import numpy as np
@@ -88,6 +90,13 @@ def load(key: str) -> GripperCalibration | None:
         return _from_json(record) if isinstance(record, dict) else None
     except (ValueError, TypeError, KeyError, IndexError):
         return None
+
+
+def digest(calibration: GripperCalibration) -> str:
+    """SHA-256 of every field of ``calibration`` as it is stored (floats exactly, by ``repr``):
+    part of the key of a model whose spec the calibration edited."""
+    text = json.dumps(_to_json(calibration), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def store(key: str, calibration: GripperCalibration) -> None:

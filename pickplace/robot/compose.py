@@ -31,6 +31,7 @@ from pickplace.robot.calibration import (
     GripperCalibration,
     calibrate_gripper,
 )
+from pickplace.robot.compiled import compile_cached
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.home_ik import home_candidates
 from pickplace.robot.ik import joint_ranges
@@ -39,7 +40,12 @@ from pickplace.robot.model import Composition, Robot
 from pickplace.robot.parts import PreparedArm, PreparedGripper, prepare_arm, prepare_gripper
 from pickplace.robot.physics import scale_squeeze, set_stiff_pad, unique_name
 from pickplace.robot.reach import ReachIK, shortfall
-from pickplace.robot.registry import DEFAULT_ROBOT, DEFAULT_WORLD, resolve_description
+from pickplace.robot.registry import (
+    DEFAULT_ROBOT,
+    DEFAULT_WORLD,
+    description_digest,
+    resolve_description,
+)
 
 ARM_PREFIX = "arm/"
 """Prefix of the arm's element names in the composed scene."""
@@ -322,6 +328,10 @@ class HeldObject:
     calibration_half: np.ndarray
     calibration_friction: np.ndarray
 
+    def key_fields(self) -> tuple[str, list[float], list[float]]:
+        """Its fields with every float exact (``repr`` of an array rounds): part of a key."""
+        return (self.body, self.calibration_half.tolist(), self.calibration_friction.tolist())
+
 
 def compose(
     world: Path | mujoco.MjSpec | None, desc: RobotDescription, brick_geom: str = BRICK_GEOM
@@ -446,6 +456,7 @@ def load_robot(
     pad_slots: int = PAD_SENSOR_SLOTS,
     bins: tuple[str, ...] = BIN_BODIES,
     held: HeldObject | None = None,
+    world_key: str | None = None,
 ) -> Composition:
     """Compose, calibrate and resolve a robot.
 
@@ -458,6 +469,9 @@ def load_robot(
         bins: The world's bin bodies, which the arm must reach (:func:`_refuse_short_reach`).
         pad_slots: Contacts each pad–brick sensor reports.
         held: Another object in the brick's place (None: the world's brick box).
+        world_key: A digest of the content of ``world`` (the file and what took the brick's
+            place in it): the compiled scene is then kept on disk and loaded by the next
+            process (:mod:`pickplace.robot.compiled`); None: compiled, not kept.
 
     Raises:
         RobotError: See :func:`compose`; also no home posture could be found.
@@ -468,7 +482,20 @@ def load_robot(
     spec, calib = composed.spec, composed.calibration
     spec.add_key(name=HOME_KEY)  # filled in once the home is known (Robot.write_home)
     arm_spec = spec.copy()  # before compiling: see Composition.arm_spec
-    model = _compile(spec, src)
+    built_from = None
+    if world_key is not None:
+        built_from = hashlib.sha256(
+            "\n".join(
+                (
+                    world_key,
+                    description_digest(desc),
+                    calibration_cache.digest(calib),
+                    repr((brick_geom, pad_slots)),
+                    "" if held is None else repr(held.key_fields()),
+                )
+            ).encode()
+        ).hexdigest()
+    model = compile_cached(spec, built_from, lambda s: _compile(s, src))
     obj = mujoco.mjtObj
     arm_names = tuple(ARM_PREFIX + j for j in composed.arm.joints)
     joint_ids = _ids(model, obj.mjOBJ_JOINT, arm_names)
@@ -523,6 +550,7 @@ def load_robot(
         spec=spec,
         model=model,
         arm_spec=arm_spec,
+        cache_key=built_from,
         robot=Robot(
             name=desc.name,
             description=desc,

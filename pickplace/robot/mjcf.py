@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pickplace.cache import read_json, write_json
+from pickplace.cache import file_digest, read_json, write_json
 from pickplace.errors import RobotError, SceneError, file_problem
 
 if TYPE_CHECKING:
@@ -402,7 +402,10 @@ def _sanitised_tree(
 def _digest(used_angle: str, files: list[Path]) -> str:
     digest = hashlib.sha256(used_angle.encode())
     for f in files:  # contents only: the same files elsewhere share a calibration
-        digest.update(f.read_bytes())
+        content = file_digest(f)
+        if content is None:  # checked readable while sanitising; gone since
+            raise RobotError(f"'{f}' cannot be read; valid: a readable file")
+        digest.update(content.encode())
     return digest.hexdigest()
 
 
@@ -500,7 +503,7 @@ def parse_world(path: Path) -> mujoco.MjSpec:
     if problem is not None:
         raise SceneError(f"scene file '{path}' {problem}")
     try:
-        with _parse_warnings() as warned:
+        with collected_warnings() as warned:
             spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:  # MuJoCo reports parse errors as ValueError.
         detail = " ".join(str(exc).split())
@@ -515,7 +518,7 @@ def parse_world(path: Path) -> mujoco.MjSpec:
 
 
 @contextlib.contextmanager
-def _parse_warnings() -> Iterator[list[str]]:
+def collected_warnings() -> Iterator[list[str]]:
     """Collect MuJoCo's C warnings in the block (instead of printing them and writing
     ``MUJOCO_LOG.TXT``); yields the list, filled as they come."""
     import mujoco  # here, not at the top (see Part.new_spec)

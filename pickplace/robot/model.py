@@ -4,6 +4,7 @@ sized from the loaded robot itself; and the composition that holds it with its m
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -13,6 +14,7 @@ import numpy as np
 from pickplace.errors import RobotError
 from pickplace.geometry import rotate_by_quat
 from pickplace.robot.calibration import GripperCalibration
+from pickplace.robot.compiled import compile_cached
 from pickplace.robot.description import RobotDescription
 
 
@@ -226,12 +228,22 @@ class Composition:
             strips: removing an element from the copy of a compiled spec costs 10–30 ms with
             a published robot's meshes (measured, Menagerie iiwa14 + 2F-85), from a copy of an
             uncompiled one about 1 ms.
+        cache_key: What ``spec`` was built from, digested: models derived from it are kept on
+            disk under keys made from it (:mod:`pickplace.robot.compiled`); None: not kept.
     """
 
     spec: mujoco.MjSpec
     model: mujoco.MjModel
     robot: Robot
     arm_spec: mujoco.MjSpec
+    cache_key: str | None = None
+
+    def derived_key(self, *what: object) -> str | None:
+        """The key of a model compiled from an edited copy of :attr:`spec`, where ``what``
+        says everything the edits depended on (None if the spec is not kept)."""
+        if self.cache_key is None:
+            return None
+        return hashlib.sha256(repr((self.cache_key, what)).encode()).hexdigest()
 
     @cached_property
     def arm_model(self) -> mujoco.MjModel:
@@ -251,7 +263,11 @@ class Composition:
         for joint in list(spec.joints):
             if joint.name not in keep:
                 spec.delete(joint)
-        model = spec.compile()
+        model = compile_cached(
+            spec,
+            self.derived_key("arm joints only", self.robot.arm_joint_names),
+            mujoco.MjSpec.compile,
+        )
         order = tuple(
             mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(model.njnt)
         )

@@ -10,6 +10,7 @@ the field and the element.
 
 from __future__ import annotations
 
+import hashlib
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,7 @@ import mujoco
 import numpy as np
 
 from pickplace.errors import RobotError
+from pickplace.robot.compiled import compile_cached
 from pickplace.robot.description import (
     ArmDescription,
     GripperDescription,
@@ -52,11 +54,24 @@ _JOINT_KIND = {
 }
 
 
-def _compile(spec: mujoco.MjSpec, part: Part) -> mujoco.MjModel:
-    try:
-        return spec.compile()
-    except ValueError as exc:
-        raise part.error(f"MuJoCo cannot compile it: {' '.join(str(exc).split())}") from exc
+def _compile(spec: mujoco.MjSpec, part: Part, step: str, *fields: object) -> mujoco.MjModel:
+    """Compile a part's spec, or load the model a process compiled before (:mod:`compiled`).
+
+    Args:
+        spec: The part's spec, edited by this module from ``part``'s document.
+        part: The part.
+        step: Which edit of the spec this is (each compiled model is kept under its own key).
+        fields: The description's fields the edits so far depended on.
+    """
+
+    def compile_now(s: mujoco.MjSpec) -> mujoco.MjModel:
+        try:
+            return s.compile()
+        except ValueError as exc:
+            raise part.error(f"MuJoCo cannot compile it: {' '.join(str(exc).split())}") from exc
+
+    built_from = hashlib.sha256(repr((step, part.xml, fields)).encode()).hexdigest()
+    return compile_cached(spec, built_from, compile_now)
 
 
 def _name(model: mujoco.MjModel, obj: mujoco.mjtObj, i: int) -> str:
@@ -344,7 +359,7 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
     repairs: list[str] = []
     if named := name_unnamed_geoms(spec):
         repairs.append(f"{named} unnamed geoms named by body and index (body/geom[k])")
-    model = _compile(spec, part)
+    model = _compile(spec, part, "arm: geoms named")
     flange_body, flange_pos, flange_quat, chosen = _flange(model, desc.arm, part, src)
     if chosen:
         repairs.append(f"no [arm] flange given: the {chosen}")
@@ -529,7 +544,7 @@ def prepare_gripper(part: Part, desc: RobotDescription) -> PreparedGripper:
             actuator.name = unique_name(existing, f"actuator{i}")
             existing.add(actuator.name)
     file_actuators = tuple(a.name for a in spec.actuators)
-    model = _compile(spec, part)
+    model = _compile(spec, part, "gripper: as read")
     if model.nu == 0:
         raise RobotError(
             f"{src}: [gripper] mjcf: '{part.path}' has no actuator; valid: a motor, position "
@@ -561,7 +576,7 @@ def prepare_gripper(part: Part, desc: RobotDescription) -> PreparedGripper:
                 f"like (gain > 0, affine bias pulling to the command); valid: <motor>, "
                 f"<position> or <general> with biastype affine"
             )
-    model = _compile(spec, part)
+    model = _compile(spec, part, "gripper: position actuators")
     kinds = classify_actuators(model)
     for a in kinds:
         if not model.actuator_ctrllimited[a.index]:
@@ -598,7 +613,7 @@ def prepare_gripper(part: Part, desc: RobotDescription) -> PreparedGripper:
     set_gripper_joint_minimums(spec)
     set_gravcomp(spec)
     set_robot_contacts(spec)
-    model = _compile(spec, part)
+    model = _compile(spec, part, "gripper: prepared", grip.couple_fingers)
     actuators = tuple(
         mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, i) for i in range(model.nu)
     )

@@ -101,7 +101,10 @@ def load_scene(
         key.update(part.encode())
     template = _SCENES.get(key.hexdigest())
     if template is None:
-        template = _compose(file.spec, file.path, desc, names, pad_slots, key.hexdigest(), held)
+        world_key = key.hexdigest() if file.self_contained else None
+        template = _compose(
+            file.spec, file.path, desc, names, pad_slots, key.hexdigest(), held, world_key
+        )
         _SCENES[key.hexdigest()] = template
     return dataclasses.replace(template, model=copy.deepcopy(template.model))
 
@@ -114,6 +117,7 @@ def _compose(
     pad_slots: int,
     key: str,
     held: HeldObject | None,
+    world_key: str | None,
 ) -> Scene:
     # The gripper is calibrated on the brick's size (an object in its place: on the world's).
     brick = spec.geom(names.brick_geom)
@@ -133,6 +137,7 @@ def _compose(
         pad_slots=pad_slots,
         bins=(names.source_bin, names.target_bin),
         held=held,
+        world_key=world_key,
     )
     scene = build_scene(composition, path, names)
     robot = scene.robot

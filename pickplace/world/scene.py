@@ -23,6 +23,7 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.errors import SceneError, UnknownNameError
+from pickplace.robot.compiled import compile_cached
 from pickplace.robot.mjcf import file_stamps, parse_world
 from pickplace.robot.model import Composition, Robot
 from pickplace.robot.physics import ROBOT_CONAFFINITY, ROBOT_CONTYPE
@@ -372,6 +373,13 @@ class WorldFile:
         """The world's physics timestep [s] (``<option timestep>``)."""
         return float(self.spec.option.timestep)
 
+    @property
+    def self_contained(self) -> bool:
+        """True if :attr:`content` is all the world is read from: the file names no other
+        MJCF file (no ``<include>``, no ``<model>`` asset), whose content it would not hold.
+        Asset files (meshes, textures) are digested from the spec where a key needs them."""
+        return b"<include" not in self.content and b"<model" not in self.content
+
 
 _WORLDS: dict[Path, tuple[tuple[tuple[str, int, int], ...], WorldFile]] = {}
 
@@ -548,11 +556,18 @@ def build_scene(
     world_bodies = _world_contact_bodies(model, mask, brick_body)
     spec = composition.spec.copy()
     sensor_names = _add_robot_world_sensors(spec, model, roots, world_bodies)
-    try:
-        model = spec.compile()  # the same model, with the robot-world contact sensors
-    except ValueError as exc:
-        detail = " ".join(str(exc).split())
-        raise SceneError(f"scene file '{path}' with the robot does not compile: {detail}") from exc
+
+    def compile_now(s: mujoco.MjSpec) -> mujoco.MjModel:
+        try:
+            return s.compile()  # the same model, with the robot-world contact sensors
+        except ValueError as exc:
+            detail = " ".join(str(exc).split())
+            raise SceneError(
+                f"scene file '{path}' with the robot does not compile: {detail}"
+            ) from exc
+
+    key = composition.derived_key("robot-world sensors", tuple(sensor_names), roots.tolist())
+    model = compile_cached(spec, key, compile_now)
     world_sensor_adr = np.array(
         [model.sensor_adr[name_to_id(model, obj.mjOBJ_SENSOR, n)] for n in sensor_names],
         dtype=int,
