@@ -17,7 +17,7 @@ import pytest
 
 from pickplace.errors import PickPlaceError, RobotError
 from pickplace.robot.calibration import PALM_CLEARANCE, TIP_CLEARANCE
-from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, load_robot
+from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, arm_limits, load_robot
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.home_ik import HOME_TOOL_SITE
 from pickplace.robot.model import Composition
@@ -512,3 +512,26 @@ def test_a_gripper_that_opens_less_than_a_grasp_needs_is_refused_in_one_line(
     message = str(err.value)
     assert "\n" not in message and str(path) in message and "[gripper] mjcf" in message
     assert "opens to 60.0 mm" in message and "at least 62.0 mm" in message
+
+
+def test_arm_limits_are_the_joint_ranges_narrowed_to_the_actuators_control_ranges() -> None:
+    # MuJoCo clamps a position actuator's control to its range: the target joint position
+    # is control / gear, so that range bounds where the joint can be sent.
+    model = mujoco.MjSpec.from_string(
+        """<mujoco><compiler angle="radian"/><worldbody>
+        <body><joint name="a" range="-2 2"/><geom size=".1"/>
+        <body><joint name="b" limited="false"/><geom size=".1"/>
+        <body><joint name="c" limited="false"/><geom size=".1"/>
+        <body><joint name="d" range="-1 1"/><geom size=".1"/>
+        <body><joint name="e" limited="false"/><geom size=".1"/>
+        </body></body></body></body></body></worldbody><actuator>
+        <position joint="a" kp="10" ctrlrange="-1 1"/>
+        <position joint="b" kp="10" ctrlrange="-1.5 1.5" gear="2"/>
+        <position joint="c" kp="10" ctrlrange="-0.5 1" gear="-1"/>
+        <position joint="d" kp="10" ctrlrange="-3 3"/>
+        <position joint="e" kp="10"/>
+        </actuator></mujoco>"""
+    ).compile()
+    q_min, q_max = arm_limits(model, np.arange(5), np.arange(5))
+    np.testing.assert_array_equal(q_min, [-1, -0.75, -1, -1, -np.inf])
+    np.testing.assert_array_equal(q_max, [1, 0.75, 0.5, 1, np.inf])

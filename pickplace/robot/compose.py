@@ -439,6 +439,30 @@ def _gripper_kind(model: mujoco.MjModel, joints: np.ndarray, gripper: PreparedGr
     return text
 
 
+def arm_limits(
+    model: mujoco.MjModel, joint_ids: np.ndarray, actuator_ids: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The positions each arm joint can be sent to [rad or m]: its range, narrowed to its
+    position actuator's control range (the target is the control over the gear, clamped by
+    MuJoCo to that range: Menagerie's Gen3 drives its continuous joints with ±2.8973 rad);
+    ±inf where neither limits it.
+
+    Args:
+        model: The composed model.
+        joint_ids: The arm joints, root to flange.
+        actuator_ids: The position actuator of each, same order.
+    """
+    limited = model.jnt_limited[joint_ids].astype(bool)
+    q_min = np.where(limited, model.jnt_range[joint_ids, 0], -np.inf)
+    q_max = np.where(limited, model.jnt_range[joint_ids, 1], np.inf)
+    for k, a in enumerate(actuator_ids):
+        if model.actuator_ctrllimited[a]:
+            ends = model.actuator_ctrlrange[a] / model.actuator_gear[a, 0]
+            q_min[k] = max(q_min[k], float(ends.min()))
+            q_max[k] = min(q_max[k], float(ends.max()))
+    return q_min, q_max
+
+
 def _compile(spec: mujoco.MjSpec, src: str) -> mujoco.MjModel:
     try:
         return spec.compile()
@@ -499,9 +523,11 @@ def load_robot(
     obj = mujoco.mjtObj
     arm_names = tuple(ARM_PREFIX + j for j in composed.arm.joints)
     joint_ids = _ids(model, obj.mjOBJ_JOINT, arm_names)
-    limited = model.jnt_limited[joint_ids].astype(bool)
-    q_min = np.where(limited, model.jnt_range[joint_ids, 0], -np.inf)
-    q_max = np.where(limited, model.jnt_range[joint_ids, 1], np.inf)
+    arm_acts = _ids(
+        model, obj.mjOBJ_ACTUATOR, tuple(ARM_PREFIX + a for a in composed.arm.actuators)
+    )
+    q_min, q_max = arm_limits(model, joint_ids, arm_acts)
+    limited = np.isfinite(q_min) | np.isfinite(q_max)
     tool_site = int(_ids(model, obj.mjOBJ_SITE, (composed.tool_site,))[0])
     if desc.arm.home is not None:
         candidates = [np.array(desc.arm.home, dtype=float)]
@@ -520,9 +546,6 @@ def load_robot(
     )
     gripper_joints = _ids(model, obj.mjOBJ_JOINT, tuple(GRIPPER_PREFIX + j for j in calib.joints))
     width = calib.open_width if home_width is None else float(home_width)
-    arm_acts = _ids(
-        model, obj.mjOBJ_ACTUATOR, tuple(ARM_PREFIX + a for a in composed.arm.actuators)
-    )
 
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)

@@ -32,10 +32,12 @@ class Robot:
         arm_joint_ids: Their joint ids.
         arm_qpos_adr: Their qpos addresses.
         arm_dof_adr: Their dof (qvel) addresses.
-        q_min: Lower limits [rad or m]; -inf for continuous (unlimited) joints.
+        q_min: Lower limits [rad or m]: the joint's range narrowed to its position
+            actuator's control range (:func:`~pickplace.robot.compose.arm_limits`); -inf for
+            continuous (unlimited) joints.
         q_max: Upper limits; +inf for continuous joints.
-        continuous: True for arm joints without a range (no position limit anywhere: their
-            actuators' control range is unlimited too).
+        continuous: True for arm joints limited by neither their range nor their actuator's
+            control range.
         v_max: Speed limits [rad/s or m/s] from the description.
         a_max: Acceleration limits [rad/s² or m/s²] from the description, or None.
         arm_actuator_ids: The position actuator of each arm joint.
