@@ -85,7 +85,14 @@ COMBINATIONS = (
     Combination("fr3-hand", "franka_fr3/fr3.xml", _HAND, _FR3, _SQUEEZE_70),
     Combination("ur5e-2f85", "universal_robots_ur5e/ur5e.xml", _2F85, _UR),
     Combination("ur10e-2f85", "universal_robots_ur10e/ur10e.xml", _2F85, _UR10E),
-    Combination("gen3-2f85", "kinova_gen3/gen3.xml", _2F85, _GEN3),
+    Combination(
+        "gen3-2f85",
+        "kinova_gen3_7dof/gen3_7dof.xml",
+        _2F85,
+        _GEN3,
+        # What the refusal of the plain mount names: its last body's z points into the arm.
+        ("mount_quat = [0, 0, 1, 0]", "mount_pos = [0, 0, -0.0644]"),
+    ),
     Combination("iiwa14-2f85", "kuka_iiwa_14/iiwa14.xml", _2F85, _IIWA14),
     Combination("sawyer-2f85", "rethink_robotics_sawyer/sawyer.xml", _2F85, _SAWYER),
     Combination("xarm7-hand", "ufactory_xarm7/xarm7_nohand.xml", "ufactory_xarm7/hand.xml", _XARM7),

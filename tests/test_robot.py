@@ -17,7 +17,7 @@ import pytest
 
 from pickplace.errors import PickPlaceError, RobotError
 from pickplace.robot.calibration import PALM_CLEARANCE, TIP_CLEARANCE
-from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, arm_limits, load_robot
+from pickplace.robot.compose import ARM_PREFIX, BRICK_GEOM, load_robot
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.home_ik import HOME_TOOL_SITE
 from pickplace.robot.model import Composition
@@ -514,24 +514,41 @@ def test_a_gripper_that_opens_less_than_a_grasp_needs_is_refused_in_one_line(
     assert "opens to 60.0 mm" in message and "at least 62.0 mm" in message
 
 
-def test_arm_limits_are_the_joint_ranges_narrowed_to_the_actuators_control_ranges() -> None:
-    # MuJoCo clamps a position actuator's control to its range: the target joint position
-    # is control / gear, so that range bounds where the joint can be sent.
-    model = mujoco.MjSpec.from_string(
-        """<mujoco><compiler angle="radian"/><worldbody>
-        <body><joint name="a" range="-2 2"/><geom size=".1"/>
-        <body><joint name="b" limited="false"/><geom size=".1"/>
-        <body><joint name="c" limited="false"/><geom size=".1"/>
-        <body><joint name="d" range="-1 1"/><geom size=".1"/>
-        <body><joint name="e" limited="false"/><geom size=".1"/>
-        </body></body></body></body></body></worldbody><actuator>
-        <position joint="a" kp="10" ctrlrange="-1 1"/>
-        <position joint="b" kp="10" ctrlrange="-1.5 1.5" gear="2"/>
-        <position joint="c" kp="10" ctrlrange="-0.5 1" gear="-1"/>
-        <position joint="d" kp="10" ctrlrange="-3 3"/>
-        <position joint="e" kp="10"/>
-        </actuator></mujoco>"""
-    ).compile()
-    q_min, q_max = arm_limits(model, np.arange(5), np.arange(5))
-    np.testing.assert_array_equal(q_min, [-1, -0.75, -1, -1, -np.inf])
-    np.testing.assert_array_equal(q_max, [1, 0.75, 0.5, 1, np.inf])
+def test_a_position_actuators_control_range_narrows_its_joints_range(tmp_path: Path) -> None:
+    # MuJoCo clamps a position actuator's control to its range: the joint's target never
+    # leaves it, so the loader makes it the joint's range (a degree file: written in degrees).
+    arm = TOY_ARM.replace(
+        '<motor joint="wrist1" ctrlrange="-20 20"/>',
+        '<position joint="wrist1" kp="100" ctrlrange="-3 3"/>',
+    ).replace(
+        '<motor joint="elbow" ctrlrange="-80 80"/>',
+        '<position joint="elbow" kp="500" ctrlrange="-2.5 2.6"/>',
+    )
+    robot = load_robot(write_toy_robot(tmp_path, arm=arm)).robot
+    np.testing.assert_allclose(robot.q_min[[2, 3]], [-2.5, -3.0])
+    np.testing.assert_allclose(robot.q_max[[2, 3]], [2.6, 3.0])
+    assert not robot.continuous.any()
+    np.testing.assert_allclose(robot.q_max[[0, 1]], np.deg2rad([170, 110]))  # motors: as read
+    assert sum("narrowed to its actuator's control range" in r for r in robot.repairs) == 2
+    toml = TOY_TOML.replace('angle = "degree"', 'angle = "degree"\nhome = [0, 0, 0, 3.5, 0, 0]')
+    with pytest.raises(RobotError, match=r"wrist1 = 3.5 is outside its range; valid: \[-3, 3\]"):
+        load_robot(write_toy_robot(tmp_path / "home", arm=arm, toml=toml))
+
+
+def test_a_gripper_pointing_back_into_the_arm_is_refused_with_a_mount_that_points_out(
+    tmp_path: Path,
+) -> None:
+    # Half a turn about the flange's x: the fingers point down the arm's last link.
+    into = TOY_TOML.replace("mount_pos = [0, 0, 0.01]", "mount_quat = [0, 1, 0, 0]")
+    with pytest.raises(RobotError) as refused:
+        load_robot(write_toy_robot(tmp_path / "into", toml=into))
+    text = str(refused.value)
+    assert "[gripper] mount_quat: the gripper points back into the arm" in text
+    # wrist3 turns about the tool axis at the flange: the way out starts at wrist2.
+    assert "180°" in text and "from joint 'arm/wrist2' to the flange 'hand_mount'" in text
+    # The mount it names (turned back; the flange's face, the 20 mm disc's half) composes.
+    assert "mount_quat = [0, 0, 0, -1] (half a turn) with mount_pos = [0, 0, 0.01]" in text
+    fixed = into.replace(
+        "mount_quat = [0, 1, 0, 0]", "mount_quat = [0, 0, 0, -1]\nmount_pos = [0, 0, 0.01]"
+    )
+    assert load_robot(write_toy_robot(tmp_path / "out", toml=fixed)).robot.n_joints == 6

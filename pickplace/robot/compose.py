@@ -411,6 +411,79 @@ def _refuse_short_reach(
         )
 
 
+def _refuse_gripper_into_arm(
+    model: mujoco.MjModel,
+    joint_ids: np.ndarray,
+    flange_body: int,
+    arm: PreparedArm,
+    tool_site: int,
+    desc_quat: np.ndarray,
+    src: str,
+) -> None:
+    """Refuse a gripper that points back into the arm (``desc_quat``: its ``mount_quat``).
+
+    At the arm's zero posture, from the nearest arm joint behind the flange (the last whose
+    anchor is not the flange itself) to the flange is the way out of the arm; a tool axis
+    (the calibrated approach direction, z) with a negative component along it points the
+    gripper into the arm's own links, which the robot never collides with: every posture then
+    carries the wrist beside the fingers. Menagerie's Gen3 has no attachment site, and its last
+    body's z axis points into the arm (Kinova's tool frame is that body's -z, 61.5 mm out).
+
+    Raises:
+        RobotError: The tool axis points into the arm; the message names the joint, the
+            flange, the angle and a mount that points the gripper out.
+    """
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    R_WF = data.xmat[flange_body].reshape(3, 3)
+    p_WF = data.xpos[flange_body] + R_WF @ arm.flange_pos
+    z_tool_W = data.site_xmat[tool_site].reshape(3, 3)[:, 2]
+    for j in joint_ids[::-1]:
+        out_W = p_WF - data.xanchor[j]
+        if np.linalg.norm(out_W) > 1e-6:  # an anchor at the flange says nothing
+            break
+    else:
+        return
+    out_W = out_W / np.linalg.norm(out_W)
+    if float(out_W @ z_tool_W) >= 0.0:
+        return
+    # Flange frame: the flange body's frame turned by the flange's own orientation.
+    R_BF = np.zeros(9)
+    mujoco.mju_quat2Mat(R_BF, arm.flange_quat)
+    R_WFl = R_WF @ R_BF.reshape(3, 3)
+    away_F = R_WFl.T @ -z_tool_W  # where the gripper should point, in the flange frame
+    depth = 0.0  # the flange body's collision geometry out along that way [m]
+    for g in np.flatnonzero(model.geom_bodyid == flange_body):
+        if model.geom_contype[g] == 0 and model.geom_conaffinity[g] == 0:
+            continue
+        mesh = int(model.geom_dataid[g]) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH else -1
+        if mesh >= 0:  # its vertices: a mesh's box is loose once turned
+            adr, n = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
+            points_G = model.mesh_vert[adr : adr + n].astype(float)
+        else:
+            centre, half = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
+            signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+            points_G = centre + signs * half
+        points_W = data.geom_xpos[g] + points_G @ data.geom_xmat[g].reshape(3, 3).T
+        depth = max(depth, float(((points_W - p_WF) @ R_WFl @ away_F).max()))
+    angle = np.degrees(np.arccos(np.clip(out_W @ z_tool_W, -1.0, 1.0)))
+    joint = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, int(j)) or f"#{j}"
+    # Half a turn about an axis across the tool axis (the flange's y, else x), after the mount.
+    across_F = np.array([0.0, 1.0, 0.0]) if abs(away_F[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    across_F -= (across_F @ away_F) * away_F
+    turned = np.zeros(4)
+    mujoco.mju_mulQuat(turned, np.r_[0.0, across_F / np.linalg.norm(across_F)], desc_quat)
+    quat = ", ".join(f"{v:.4g}" for v in np.round(turned, 4) + 0.0)
+    pos = ", ".join(f"{v:.4g}" for v in np.round(depth * away_F, 4) + 0.0)
+    raise RobotError(
+        f"{src}: [gripper] mount_quat: the gripper points back into the arm: its tool axis "
+        f"is {angle:.0f}° from the way out of the arm (from joint '{joint}' to the flange "
+        f"'{arm.flange_body}'); valid: a mount that points it out, e.g. mount_quat = [{quat}] "
+        f"(half a turn) with mount_pos = [{pos}] (the flange body's face), or an [arm] flange "
+        f"site whose z axis points out of the arm"
+    )
+
+
 def _ids(model: mujoco.MjModel, obj: mujoco.mjtObj, names: tuple[str, ...]) -> np.ndarray:
     out = []
     for n in names:
@@ -437,30 +510,6 @@ def _gripper_kind(model: mujoco.MjModel, joints: np.ndarray, gripper: PreparedGr
     if gripper.coupling is not None:
         text += " (independent fingers coupled by the loader)"
     return text
-
-
-def arm_limits(
-    model: mujoco.MjModel, joint_ids: np.ndarray, actuator_ids: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The positions each arm joint can be sent to [rad or m]: its range, narrowed to its
-    position actuator's control range (the target is the control over the gear, clamped by
-    MuJoCo to that range: Menagerie's Gen3 drives its continuous joints with ±2.8973 rad);
-    ±inf where neither limits it.
-
-    Args:
-        model: The composed model.
-        joint_ids: The arm joints, root to flange.
-        actuator_ids: The position actuator of each, same order.
-    """
-    limited = model.jnt_limited[joint_ids].astype(bool)
-    q_min = np.where(limited, model.jnt_range[joint_ids, 0], -np.inf)
-    q_max = np.where(limited, model.jnt_range[joint_ids, 1], np.inf)
-    for k, a in enumerate(actuator_ids):
-        if model.actuator_ctrllimited[a]:
-            ends = model.actuator_ctrlrange[a] / model.actuator_gear[a, 0]
-            q_min[k] = max(q_min[k], float(ends.min()))
-            q_max[k] = min(q_max[k], float(ends.max()))
-    return q_min, q_max
 
 
 def _compile(spec: mujoco.MjSpec, src: str) -> mujoco.MjModel:
@@ -526,9 +575,20 @@ def load_robot(
     arm_acts = _ids(
         model, obj.mjOBJ_ACTUATOR, tuple(ARM_PREFIX + a for a in composed.arm.actuators)
     )
-    q_min, q_max = arm_limits(model, joint_ids, arm_acts)
-    limited = np.isfinite(q_min) | np.isfinite(q_max)
+    limited = model.jnt_limited[joint_ids].astype(bool)
+    q_min = np.where(limited, model.jnt_range[joint_ids, 0], -np.inf)
+    q_max = np.where(limited, model.jnt_range[joint_ids, 1], np.inf)
     tool_site = int(_ids(model, obj.mjOBJ_SITE, (composed.tool_site,))[0])
+    flange_body = int(_ids(model, obj.mjOBJ_BODY, (ARM_PREFIX + composed.arm.flange_body,))[0])
+    _refuse_gripper_into_arm(
+        model,
+        joint_ids,
+        flange_body,
+        composed.arm,
+        tool_site,
+        np.array(desc.gripper.mount_quat, dtype=float),
+        src,
+    )
     if desc.arm.home is not None:
         candidates = [np.array(desc.arm.home, dtype=float)]
         home_source = "description"
@@ -618,9 +678,7 @@ def load_robot(
             gripper_geom_ids=np.flatnonzero(in_gripper & collide),
             footprint_G=calib.footprint_G.copy(),
             p_W_base=data.xanchor[joint_ids[0]].copy(),
-            flange_body_id=int(
-                _ids(model, obj.mjOBJ_BODY, (ARM_PREFIX + composed.arm.flange_body,))[0]
-            ),
+            flange_body_id=flange_body,
             home_key_id=key,
             home_width=width,
             calibration=calib,

@@ -32,9 +32,8 @@ class Robot:
         arm_joint_ids: Their joint ids.
         arm_qpos_adr: Their qpos addresses.
         arm_dof_adr: Their dof (qvel) addresses.
-        q_min: Lower limits [rad or m]: the joint's range narrowed to its position
-            actuator's control range (:func:`~pickplace.robot.compose.arm_limits`); -inf for
-            continuous (unlimited) joints.
+        q_min: Lower limits [rad or m] (a joint's range is narrowed to its position
+            actuator's control range by the loader); -inf for continuous (unlimited) joints.
         q_max: Upper limits; +inf for continuous joints.
         continuous: True for arm joints limited by neither their range nor their actuator's
             control range.

@@ -340,6 +340,36 @@ def _chain_joints(model: mujoco.MjModel, flange_body: int, part: Part, src: str)
     return joints
 
 
+def _narrow_to_control_range(
+    spec: mujoco.MjSpec, model: mujoco.MjModel, joint: int, actuator: int, name: str
+) -> tuple[str, tuple[float, float]] | None:
+    """Give an arm joint its position actuator's control range where that is narrower than
+    the joint's range (or the joint has none): what was done and the new range [rad or m],
+    or None if nothing changed.
+
+    MuJoCo clamps the control, so the joint's target (control over gear) never leaves that
+    range: Menagerie's Gen3 drives its unlimited joints with ±2.8973 rad. As a joint range
+    every model of the robot (the IK's, the planner's, the simulation's) keeps to it.
+    """
+    if not model.actuator_ctrllimited[actuator]:
+        return None
+    ends = model.actuator_ctrlrange[actuator] / model.actuator_gear[actuator, 0]
+    lo, hi = model.jnt_range[joint] if model.jnt_limited[joint] else (-np.inf, np.inf)
+    new_lo, new_hi = max(float(lo), float(ends.min())), min(float(hi), float(ends.max()))
+    if (new_lo, new_hi) == (lo, hi):
+        return None
+    element = spec.joint(name)
+    element.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+    hinge = model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_HINGE
+    scale = 180.0 / np.pi if hinge and spec.compiler.degree else 1.0
+    element.range = [new_lo * scale, new_hi * scale]
+    text = (
+        f"arm joint '{name}' range narrowed to its actuator's control range "
+        f"[{new_lo:g}, {new_hi:g}] (the target is clamped to it)"
+    )
+    return text, (new_lo, new_hi)
+
+
 def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> PreparedArm:
     """Find the arm's joints and give each one position actuator.
 
@@ -376,13 +406,10 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
         check_per_joint(desc.source, "[arm] accel_limits", desc.arm.accel_limits, names, "rad/s²")
     if desc.arm.home is not None:
         check_per_joint(desc.source, "[arm] home", desc.arm.home, names, "rad")
-        for j, name, q in zip(joint_ids, names, desc.arm.home, strict=True):
-            lo, hi = model.jnt_range[j]
-            if model.jnt_limited[j] and not lo <= q <= hi:
-                raise RobotError(
-                    f"{src}: [arm] home: {name} = {q:g} is outside its range; valid: "
-                    f"[{lo:g}, {hi:g}]"
-                )
+    ranges = {
+        j: (tuple(model.jnt_range[j]) if model.jnt_limited[j] else (-np.inf, np.inf))
+        for j in joint_ids
+    }
 
     kinds = classify_actuators(model)
     by_joint: dict[int, list[ActuatorKind]] = {}
@@ -426,6 +453,9 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
                 kp = ARM_KP
             elif a.kind == "position":
                 kp = float(model.actuator_gainprm[a.index, 0])
+                if narrowed := _narrow_to_control_range(spec, model, j, a.index, name):
+                    repairs.append(narrowed[0])
+                    ranges[j] = narrowed[1]
             else:
                 raise RobotError(
                     f"{src}: [arm] mjcf: actuator '{actuator.name}' on arm joint '{name}' is "
@@ -438,6 +468,12 @@ def prepare_arm(part: Part, desc: RobotDescription, timestep: float) -> Prepared
         raise_armature(joint, arm_min_armature(kp, timestep))
         if joint.armature > before:
             repairs.append(f"arm joint '{name}' armature {before:g} → {joint.armature:g}")
+    for j, name, q in zip(joint_ids, names, desc.arm.home or (), strict=False):
+        lo, hi = ranges[j]
+        if not lo <= q <= hi:
+            raise RobotError(
+                f"{src}: [arm] home: {name} = {q:g} is outside its range; valid: [{lo:g}, {hi:g}]"
+            )
     lowest, lowest_geom = _lowest_swivel_point(model, np.array(desc.arm.base_quat))
     set_gravcomp(spec)
     set_robot_contacts(spec)
