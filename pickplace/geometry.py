@@ -269,6 +269,33 @@ def box_tilt(R_WO: SO3) -> float:
     return float(np.arccos(np.clip(np.abs(M[2, :]).max(), -1.0, 1.0)))
 
 
+def upright_turn(R_WO: SO3) -> FloatArray:
+    """The turn R of :data:`AXIS_ROTATIONS` that puts a box frame O's axis nearest world z as
+    the z of ``O' = O · R``, the first such (the identity for a box lying with its z up).
+
+    A box standing on a face its frame's z is not normal to (a brick on its end) is, in O',
+    the same box lying with its z up: sizes ``|R|ᵀ h`` along O''s axes for sizes h along O's.
+    """
+    M = R_WO.as_matrix()
+    ups = [float((M @ R)[2, 2]) for R in AXIS_ROTATIONS]
+    return AXIS_ROTATIONS[int(np.argmax(ups))]
+
+
+def vertical_axis(R_WO: SO3) -> int:
+    """The index (0 x, 1 y, 2 z) of frame O's axis nearest world z: a half turn about it is a
+    symmetry of a box resting on a face, and turns it about the vertical."""
+    return int(np.argmax(np.abs(R_WO.as_matrix()[2, :])))
+
+
+HALF_TURNS = tuple(np.diag([1.0 if i == axis else -1.0 for i in range(3)]) for axis in range(3))
+"""The half turns about O's x, y and z, as rotation matrices in O."""
+
+
+def half_turn(axis: int) -> SO3:
+    """The half turn about O's axis ``axis`` (0 x, 1 y, 2 z)."""
+    return (SO3.from_x_radians, SO3.from_y_radians, SO3.from_z_radians)[axis](math.pi)
+
+
 def box_resting_frame(X_WO: SE3, half_extents: npt.ArrayLike) -> SE3 | None:
     """The box's frame turned onto the face it rests on, when that turn maps the box onto
     itself: ``X_WO · R`` with R one of :data:`AXIS_ROTATIONS` such that the box's sizes along

@@ -29,13 +29,16 @@ from pickplace.robot.calibration import (
     ACTION_HOLD,
     GRASP_OPEN_WIDTH,
     GRIP_FORCE_SHARE,
+    MIN_PAD_CLEARANCE,
+    PAD_CLEARANCE,
     RELEASE_CLEARANCE,
 )
 from pickplace.robot.registry import DEFAULT_ROBOT, bundled_robots
-from pickplace.run.runner import RunRequest, run
+from pickplace.run.runner import RunRequest, prepare, run
 from pickplace.sim.loader import load_scene
 from pickplace.sim.scenarios import REACH_OVERSHOOT, SCENARIOS, full_stretch_distance
 from pickplace.sweep.sweep import SweepRequest, run_sweep
+from pickplace.world.placements import BrickPlacement
 from pickplace.world.scene import Scene
 from tests.conftest import finished
 from tests.toy_robot import write_toy_robot
@@ -231,3 +234,34 @@ def test_every_fault_has_its_documented_outcome_with_every_robot(robot: str, sce
     result = finished(scenario, robot=robot).result
     assert result.failure is not None
     assert result.failure.value == SCENARIOS[scenario].expected
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ["menagerie-panda-hand", "panda-hand"])
+def test_an_80_mm_hand_closes_across_the_brick_s_length_beside_a_wall(robot: str) -> None:
+    """A brick lying along bin 1's +y wall, 15 mm from it: the Panda hand's palm (its long
+    side along the closing axis) fits only closing across the 75 mm length, open to all of its
+    80 mm (2.5 mm a side, below PAD_CLEARANCE). The pads come down beside the end faces
+    without touching the brick (0 N, the brick unmoved until the fingers close) and the
+    pick and place succeeds."""
+    scene = load_scene(robot=robot)
+    bin1 = scene.source_bin
+    centre, half = bin1.center_W, bin1.inner_half_extents
+    y = float(centre[1] + half[1]) - float(scene.brick_half_extents[1]) - 0.015
+    placement = BrickPlacement(float(centre[0]), y, 0.0)
+    _, task, sim = prepare(RunRequest(scenario="pick-place", robot=robot, brick=placement))
+    assert task.planning is not None and task.planning.chosen is not None
+    grasp = task.planning.candidates[task.planning.chosen].label
+    assert grasp.startswith("across the length")
+    opening = sim.scene.robot.calibration.open_width
+    length = 2.0 * float(scene.brick_half_extents[0])
+    assert MIN_PAD_CLEARANCE <= 0.5 * (opening - length) < PAD_CLEARANCE
+    result = sim.run()
+    assert result.success, result.failure_text
+    log, phases = sim.log, task.plan.phases
+    assert phases is not None
+    before = log.t[: sim.ticks] < phases.approach[1] + PlanConfig().settle_time
+    assert float(log.pad_force[: sim.ticks][before].max()) == 0.0
+    brick = sim.scene.brick_body_id
+    p = log.body_pos[: sim.ticks][before][:, brick]
+    assert float(np.linalg.norm(p - p[0], axis=1).max()) < 0.5e-3

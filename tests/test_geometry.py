@@ -13,9 +13,11 @@ from mink.lie import SE3, SO3
 from pickplace.errors import PlanError
 from pickplace.geometry import (
     AXIS_ROTATIONS,
+    HALF_TURNS,
     box_corners,
     box_resting_frame,
     box_tilt,
+    half_turn,
     pose_error_W,
     pose_error_W_floats,
     quaternion_angle,
@@ -25,6 +27,8 @@ from pickplace.geometry import (
     rotation_vector_W,
     slerp,
     transform_points,
+    upright_turn,
+    vertical_axis,
     wrap_angle,
 )
 
@@ -166,3 +170,30 @@ def test_a_brick_standing_on_its_end_has_no_resting_frame_and_on_any_other_face_
         elif abs(lying.rotation().as_matrix()[2, 0]) > 0.5:  # its 75 mm axis up
             assert frame is None
     assert kept == 8
+
+
+def test_upright_turn_puts_the_face_the_box_rests_on_under_a_z_up_frame_of_its_sizes() -> None:
+    """For each of the 24 ways a 75 x 50 x 50 mm brick can rest, the turned frame O · R has
+    its z up, the box's sizes along its axes are |R|ᵀ h (the corners the same points), and
+    the half turn about the axis nearest vertical turns the box about world z onto itself."""
+    half = np.array([0.0375, 0.025, 0.025])
+    corners = box_corners(half)
+    for R in AXIS_ROTATIONS:
+        X_WO = SE3.from_rotation_and_translation(
+            SO3.from_z_radians(-1.1), np.array([0.2, 0.3, 0.04])
+        ) @ SE3.from_rotation(SO3.from_matrix(R))
+        turn = upright_turn(X_WO.rotation())
+        X_WOp = X_WO @ SE3.from_rotation(SO3.from_matrix(turn))
+        assert X_WOp.rotation().as_matrix()[2, 2] == pytest.approx(1.0, abs=1e-12)
+        a = np.sort(transform_points(X_WOp, box_corners(np.abs(turn).T @ half)).round(9), axis=0)
+        b = np.sort(transform_points(X_WO, corners).round(9), axis=0)
+        np.testing.assert_allclose(a, b, atol=1e-9)
+        H = SO3.from_matrix(HALF_TURNS[vertical_axis(X_WO.rotation())])
+        np.testing.assert_allclose(
+            half_turn(vertical_axis(X_WO.rotation())).as_matrix(), H.as_matrix(), atol=1e-15
+        )
+        R_W = (X_WO.rotation() @ H @ X_WO.rotation().inverse()).as_matrix()
+        np.testing.assert_allclose(R_W, np.diag([-1.0, -1.0, 1.0]), atol=1e-12)
+        turned = SE3.from_rotation_and_translation(X_WO.rotation() @ H, X_WO.translation())
+        c = np.sort(transform_points(turned, corners).round(9), axis=0)
+        np.testing.assert_allclose(c, b, atol=1e-9)

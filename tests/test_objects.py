@@ -15,7 +15,8 @@ from mink.lie import SE3, SO3
 
 from pickplace.errors import SceneError
 from pickplace.planning.candidates import GraspCandidate
-from pickplace.robot.calibration import PAD_CLEARANCE
+from pickplace.planning.plan import PlanConfig, for_gripper
+from pickplace.robot.calibration import pad_clearance
 from pickplace.run.runner import RunRequest, run
 from pickplace.sweep.trial import TrialSpec
 from pickplace.world.objects import BUNDLED_OBJECTS, OBJECTS_DIR, ObjectGeom, ObjectGeometry
@@ -286,9 +287,12 @@ def test_the_object_rests_in_bin_1_and_is_grasped_across_its_width(name: str) ->
     lo, hi = WIDTHS[name]
     grasps = object_grasps_of(scene)
     assert grasps
+    opening = for_gripper(PlanConfig(), scene.robot.calibration).open_width
     for g in grasps:  # the opening is only as wide as the object plus the clearance a side
         assert lo - 1e-6 <= g.width <= hi + 1e-6  # a mesh is stored in float32
-        assert g.open_width == pytest.approx(g.width + 2 * PAD_CLEARANCE)
+        clearance = pad_clearance(g.width, opening)
+        assert clearance is not None
+        assert g.open_width == pytest.approx(g.width + 2 * clearance)
         assert shape.width_across(g.X_OG) == pytest.approx(g.width)
 
 

@@ -19,11 +19,11 @@ from pickplace.planning.candidates import (
     GRASP_OFFSET_FRACTIONS,
     GRASP_TILTS,
     GRAVITY,
-    PAD_CLEARANCE,
     gravity_torque,
 )
 from pickplace.planning.plan import PlanConfig, plan_pick_place
 from pickplace.planning.planner import PickPlacePlanner
+from pickplace.robot.calibration import MIN_PAD_CLEARANCE, PAD_CLEARANCE
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.checks import FailureReason
 from pickplace.sim.loader import load_scene
@@ -98,10 +98,27 @@ def test_the_weight_s_torque_about_the_pads_is_weight_times_offset(scene: Scene)
         assert tau == pytest.approx(m * GRAVITY * abs(g.offset), abs=1e-12)
 
 
-def test_a_narrow_gripper_gets_no_length_grasp(scene: Scene) -> None:
-    """Closing across the 75 mm length needs the fingers open to 75 + 2 x 6 mm."""
-    planner = PickPlacePlanner(scene, "qp", PlanConfig(open_width=0.08))
-    assert {g.label.split(",")[0] for g in planner.grasps()} == {"across the width"}
+@pytest.mark.parametrize(
+    ("open_width", "length_clearance"),
+    [(0.088, PAD_CLEARANCE), (0.08, 0.0025), (0.0789, None), (0.0785, None)],
+)
+def test_a_narrow_gripper_closes_across_the_length_with_what_it_opens_beyond_it(
+    scene: Scene, open_width: float, length_clearance: float | None
+) -> None:
+    """Closing across the 75 mm length: 6 mm a side where the fingers open to 87 mm, what
+    they open beyond it a side down to MIN_PAD_CLEARANCE (80 mm: 2.5 mm), none below 79 mm;
+    across the 50 mm width always 6 mm."""
+    planner = PickPlacePlanner(scene, "qp", PlanConfig(open_width=open_width))
+    length = 2.0 * float(scene.brick_half_extents[0])
+    by_name: dict[str, set[float]] = {}
+    for g in planner.grasps():
+        by_name.setdefault(g.label.split(",")[0], set()).add(round(g.open_width - g.width, 12))
+    assert by_name["across the width"] == {round(2.0 * PAD_CLEARANCE, 12)}
+    if length_clearance is None:
+        assert "across the length" not in by_name
+        assert length + 2.0 * MIN_PAD_CLEARANCE > open_width
+    else:
+        assert by_name["across the length"] == {round(2.0 * length_clearance, 12)}
 
 
 def test_the_open_hand_s_footprint_is_the_distance_of_its_boxes_to_the_walls(

@@ -11,9 +11,11 @@ from typing import Any
 import mujoco
 import numpy as np
 import pytest
+from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, PlanError
+from pickplace.geometry import AXIS_ROTATIONS, box_corners, transform_points
 from pickplace.planning.planner import PickPlacePlanner, Start
 from pickplace.planning.preflight import Preflight
 from pickplace.run.runner import RunRequest, prepare
@@ -33,6 +35,7 @@ from pickplace.sim.recovery import (
     StopTrajectory,
     check_attempts,
     limit_held,
+    standing_goal,
 )
 from pickplace.sim.ticklog import TickLog
 from pickplace.sim.verdict import WALL_TIME_FIELDS, RunResult, brick_pose, placement_problems
@@ -166,6 +169,45 @@ def test_a_brick_knocked_upside_down_is_picked_again_as_it_lies() -> None:
     first, second = result.summary()["attempts"]
     assert first["failure"] == "dropped" and first["failure_tick"] == once.failure_tick
     assert first["failure_text"] == once.failure_text and second["success"]
+
+
+@pytest.mark.slow
+def test_a_brick_knocked_onto_its_end_is_picked_standing_and_placed_standing() -> None:
+    """The knock stands the 2F-85's brick on a 50 x 50 mm end in bin 1 (a face no turn of its
+    lying frame puts down): it is planned as the box lying in a turned frame, 75 mm tall, and
+    placed on the same end in bin 2, resting there flat within the verdict's tilt."""
+    sim, result = _run("fault-knock", 3, robot="menagerie-iiwa14-2f85")
+    assert result.success, result.failure_text
+    first, second = result.summary()["attempts"]
+    assert first["failure"] == "dropped" and second["success"]
+    texts = [e.text for e in result.events if "standing" in e.text]
+    assert texts and "75 mm tall" in texts[0]
+    X_WO = brick_pose(sim.scene, sim.data)
+    M = X_WO.rotation().as_matrix()
+    half = sim.scene.object.box_half_extents
+    assert half is not None
+    axis = int(np.argmax(np.abs(M[2, :])))
+    assert half[axis] == pytest.approx(float(half.max()))  # its long axis vertical
+    bottom = X_WO.translation()[2] - half[axis]
+    assert bottom == pytest.approx(sim.scene.target_bin.floor_top_z, abs=1e-3)
+    assert placement_problems(sim.scene, sim.data, sim.scene.target_bin, sim.criteria, 0.0) == []
+
+
+def test_standing_goal_rests_the_turned_box_on_the_goal_s_floor_about_its_yaw() -> None:
+    """The goal of a box standing on its end: the turned frame has the goal's rotation, and
+    the box's lowest point lies on the floor the lying goal rests on."""
+    half = np.array([0.0375, 0.025, 0.025])
+    X_goal = SE3.from_rotation_and_translation(SO3.from_z_radians(0.4), np.array([0.5, 0, 0.035]))
+    floor = 0.035 - half[2]
+    for R in AXIS_ROTATIONS:
+        X = standing_goal(X_goal, half, R)
+        X_p = X @ SE3.from_rotation(SO3.from_matrix(R))
+        np.testing.assert_allclose(
+            X_p.rotation().as_matrix(), X_goal.rotation().as_matrix(), atol=1e-12
+        )
+        low = transform_points(X, box_corners(half))[:, 2].min()
+        assert low == pytest.approx(floor, abs=1e-12)
+        np.testing.assert_allclose(X.translation()[:2], X_goal.translation()[:2], atol=1e-15)
 
 
 def test_only_grasp_failures_are_recoverable() -> None:

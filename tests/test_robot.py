@@ -505,13 +505,13 @@ def test_a_gripper_short_of_its_squeeze_at_gap_0_closes_once_the_gap_reaches_the
 def test_a_gripper_that_opens_less_than_a_grasp_needs_is_refused_in_one_line(
     tmp_path: Path,
 ) -> None:
-    gripper = TOY_GRIPPER.replace('range="0 0.045"', 'range="0 0.028"')  # joints, ctrl
+    gripper = TOY_GRIPPER.replace('range="0 0.045"', 'range="0 0.024"')  # joints, ctrl
     path = write_toy_robot(tmp_path, gripper=gripper)
     with pytest.raises(RobotError) as err:
         load_robot(path)
     message = str(err.value)
     assert "\n" not in message and str(path) in message and "[gripper] mjcf" in message
-    assert "opens to 60.0 mm" in message and "at least 62.0 mm" in message
+    assert "opens to 52.0 mm" in message and "at least 54.0 mm" in message
 
 
 def test_a_position_actuators_control_range_narrows_its_joints_range(tmp_path: Path) -> None:

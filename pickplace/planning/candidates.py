@@ -7,7 +7,9 @@ G's y), W the world, B a bin's frame.
 Candidates of the brick (:func:`box_grasps`; any other object: :func:`object_grasps`, the
 same from its support patches at 12 closing directions): the pads on two opposite faces of
 the box (antipodal: the faces' normals are the closing axis), for each pair of side faces
-whose width plus :data:`PAD_CLEARANCE` on each side the gripper opens to:
+whose width plus a clearance on each side the gripper opens to
+(:func:`~pickplace.robot.calibration.pad_clearance`: 6 mm where it opens that wide, down to 2 mm
+where it does not):
 
 * the approach from straight down (``R_OG = Ry(π)`` across the width) tilted about the
   closing axis by each angle of :data:`GRASP_TILTS`, either way: a rotation about the face
@@ -34,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from mink.lie import SE3, SO3
 
-from pickplace.robot.calibration import PAD_CLEARANCE
+from pickplace.robot.calibration import pad_clearance
 from pickplace.world.objects import ObjectGeometry
 from pickplace.world.scene import BinGeometry
 
@@ -68,7 +70,8 @@ class GraspCandidate:
         label: In words, e.g. ``"across the width, tilted 15°, turned 180°"``.
         X_OG: The tool site in the object frame.
         width: The object's width between the pads [m].
-        open_width: Finger gap commanded when open around it: ``width + 2 PAD_CLEARANCE`` [m].
+        open_width: Finger gap commanded when open around it: ``width`` plus twice
+            :func:`~pickplace.robot.calibration.pad_clearance` [m].
         tilt: Tilt of the approach from vertical about the closing axis [rad].
         offset: Offset of the pads' centre along the face from the face's centre [m].
         turned: The wrist turned half a turn (fingers swapped).
@@ -105,8 +108,8 @@ def box_grasps(
         offset_fractions: Offsets as fractions of the largest that keeps the pad on the face.
 
     Yields:
-        The candidates, for each face pair whose width plus ``2 PAD_CLEARANCE`` is at most
-        ``max_open_width``.
+        The candidates, for each face pair whose width the gripper opens to with
+        :func:`~pickplace.robot.calibration.pad_clearance` a side.
     """
     h = np.asarray(half_extents, dtype=np.float64)
     bases = (
@@ -115,9 +118,10 @@ def box_grasps(
     )
     for name, axis, R_base in bases:
         width = 2.0 * float(h[axis])
-        open_width = width + 2.0 * PAD_CLEARANCE
-        if open_width > max_open_width:
+        clearance = pad_clearance(width, max_open_width)
+        if clearance is None:
             continue
+        open_width = width + 2.0 * clearance
         x_O = R_base.as_matrix()[:, 0]  # G's x in O: along the face, horizontal
         travel = max(0.0, float(np.abs(x_O) @ h) - pad_half_length)
         signed_tilts = [0.0] + [s * t for t in tilts if t > 0.0 for s in (1.0, -1.0)]
@@ -170,8 +174,8 @@ def object_grasps(
     midway between the patches, over their common part. Then, as for the box: every tilt
     about ``d`` either way, offsets along the patch horizontally (fractions of the travel that
     keeps the pad on it) and up it (:data:`GRASP_HEIGHT_FRACTIONS`), both wrist turns. The
-    opening is the width plus :data:`PAD_CLEARANCE` a side, and a direction whose opening
-    exceeds ``max_open_width`` is skipped.
+    opening is the width plus :func:`~pickplace.robot.calibration.pad_clearance` a side, and a
+    direction the gripper does not open to with the least of it is skipped.
 
     Args:
         shape: The object's geometry.
@@ -194,9 +198,10 @@ def object_grasps(
         x_O, d = M[:, 0], M[:, 1]  # G's x (horizontal, along the pads) and the closing axis
         plus, minus = shape.support(d), shape.support(-d)
         width = plus + minus
-        open_width = width + 2.0 * PAD_CLEARANCE
-        if open_width > max_open_width:
+        clearance = pad_clearance(width, max_open_width)
+        if clearance is None:
             continue
+        open_width = width + 2.0 * clearance
         spans = []
         gap = 0.0
         (c1, h1), (c2, h2) = shape.patch(d), shape.patch(-d)

@@ -26,7 +26,7 @@ import numpy.typing as npt
 from mink.lie import SE3, SO3
 
 from pickplace.errors import PlanError
-from pickplace.geometry import require_pose, wrap_angle
+from pickplace.geometry import half_turn, require_pose, vertical_axis, wrap_angle
 
 _HORIZONTAL_TOL = 1e-9
 """Below this horizontal length [-], G's x axis is considered vertical in ``yaw_of``."""
@@ -108,7 +108,8 @@ def choose_place_pose(X_WO_goal: SE3, X_OG: SE3, X_WG_reference: SE3) -> SE3:
         X_WG_reference: Pose to compare yaws with, normally the pick pose.
 
     Returns:
-        ``X_WO_goal · X_OG`` or ``X_WO_goal · Rz(π) · X_OG`` (the same physical brick pose),
+        ``X_WO_goal · X_OG`` or ``X_WO_goal · H · X_OG``, H the half turn about the brick's
+        axis nearest vertical (``Rz(π)`` lying with its z up: the same physical brick pose),
         whichever has the smaller yaw change from ``X_WG_reference`` (ties keep the first).
 
     Raises:
@@ -119,7 +120,8 @@ def choose_place_pose(X_WO_goal: SE3, X_OG: SE3, X_WG_reference: SE3) -> SE3:
     require_pose("X_WG_reference", X_WG_reference)
     yaw = yaw_of(X_WG_reference.rotation())
     first = X_WO_goal @ X_OG
-    second = X_WO_goal @ SE3.from_rotation(SO3.from_z_radians(math.pi)) @ X_OG
+    # A half turn about the brick's vertical axis (its z when it lies with its z up).
+    second = X_WO_goal @ SE3.from_rotation(half_turn(vertical_axis(X_WO_goal.rotation()))) @ X_OG
     if _yaw_change(second, yaw) < _yaw_change(first, yaw):
         return second
     return first

@@ -3,7 +3,7 @@
 The planner makes the grasp candidates of the object's box (:func:`~pickplace.planning.candidates.
 box_grasps`: both pairs of side faces, the approach vertical or tilted about the closing axis,
 the pads centred or off-centre along the face, both wrist turns; the gripper opened to the
-object's width plus :data:`~pickplace.planning.candidates.PAD_CLEARANCE` a side), and ranks them
+object's width plus :func:`~pickplace.robot.calibration.pad_clearance` a side), and ranks them
 by tests that need no IK, in this order:
 
 1. reach: the tool at the pick and the place within the arm's reach (the sum of its link
@@ -17,7 +17,9 @@ by tests that need no IK, in this order:
    :data:`WRIST_MARGIN` from its limits.
 
 A candidate failing 1 or 2 is not pre-flighted; one failing 3 is ranked after those that pass.
-Among the passing, the smaller tilt first, then the smaller torque of the weight about the pads
+Among the passing, those with the whole pad clearance a side first (a grasp the gripper opens
+to only with less, :data:`~pickplace.robot.calibration.MIN_PAD_CLEARANCE` at least, after
+them), then the smaller tilt, then the smaller torque of the weight about the pads
 (:func:`~pickplace.planning.candidates.gravity_torque`), then the narrower width, then the
 smaller wrist travel (the nearest yaw, as every plan chose before candidates existed). The best
 :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own controller
@@ -57,15 +59,22 @@ from typing import Any
 
 import mujoco
 import numpy as np
-from mink.lie import SE3
+from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import ObjectError, PlanError
-from pickplace.geometry import pose_error_W_floats, require_pose
+from pickplace.geometry import (
+    HALF_TURNS,
+    FloatArray,
+    pose_error_W_floats,
+    require_pose,
+    vertical_axis,
+)
 from pickplace.planning.candidates import (
     GRAVITY,
     GraspCandidate,
     HandFootprint,
+    box_grasps,
     object_grasps,
 )
 from pickplace.planning.cspace import (
@@ -96,7 +105,7 @@ from pickplace.planning.preflight import (
 )
 from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
 from pickplace.planning.trajectory import JointSegment, PoseTrajectory
-from pickplace.robot.calibration import PAD_CLEARANCE
+from pickplace.robot.calibration import MIN_PAD_CLEARANCE, PAD_CLEARANCE
 from pickplace.signals import stop_point
 from pickplace.world.scene import BinGeometry, Scene
 
@@ -111,7 +120,6 @@ SWEEP_SLOWDOWNS = 2
 """Times a candidate's path sweep is run again at half its speed when the IK fell behind it
 held by a joint limit (the sweep's constant speed, set by its spacing, is not the robot's;
 the timing comes after it)."""
-_RZ_PI = np.diag([-1.0, -1.0, 1.0])  # a half turn about z
 
 
 def _keyframe_at(times: list[float], t: float) -> int:
@@ -378,6 +386,7 @@ class Ranked:
         return (
             self.problem is not None,
             self.wrist_margin < WRIST_MARGIN,
+            self.grasp.open_width - self.grasp.width < 2.0 * PAD_CLEARANCE - 1e-12,
             abs(self.grasp.tilt),
             round(self.torque, 9),
             round(self.grasp.width, 9),
@@ -485,12 +494,15 @@ class PickPlacePlanner:
                 f"the object ({shape.kinds}) is at least {narrowest * 1000:.0f} mm across every "
                 f"horizontal direction it can be grasped along; the gripper opens to "
                 f"{self.config.open_width * 1000:.0f} mm; valid: an object at most "
-                f"{(self.config.open_width - 2 * PAD_CLEARANCE) * 1000:.0f} mm across "
+                f"{(self.config.open_width - 2 * MIN_PAD_CLEARANCE) * 1000:.0f} mm across "
                 "(the opening less the pad clearance a side)"
             )
         self._R_OG = np.array([g.X_OG.rotation().as_matrix() for g in self._grasps])
         self._p_OG = np.array([g.X_OG.translation() for g in self._grasps])
         self._open_widths = np.array([g.open_width for g in self._grasps])
+        self._turned: dict[
+            bytes, tuple[list[GraspCandidate], FloatArray, FloatArray, FloatArray]
+        ] = {}
         self._bin_frames = {
             b.name: (b.X_WB.inverse().rotation().as_matrix(), b.X_WB.inverse().translation())
             for b in (src, dst)
@@ -524,6 +536,7 @@ class PickPlacePlanner:
         X_WO_place: SE3,
         first_feasible: bool = True,
         start: Start | None = None,
+        turn: FloatArray | None = None,
     ) -> PlanningReport:
         """Rank the candidates, pre-flight the best few in order; stop at the first feasible
         one (unless told not to).
@@ -534,15 +547,20 @@ class PickPlacePlanner:
             first_feasible: Stop at the first feasible candidate (else pre-flight all of the
                 best :data:`MAX_PREFLIGHTS`).
             start: Where the plans start (configuration and tool pose); None: at home.
+            turn: For a box resting on a face its frame's z is not normal to (a brick
+                standing on its end): the turn R (3, 3) of its frame O such that it lies with
+                the z of ``O · R`` up (:func:`~pickplace.geometry.upright_turn`); the grasps
+                are then the box's in that frame (:meth:`turned_grasps`). None: O's z is up.
 
         Raises:
-            PlanError: ``start.q`` is not one finite angle per arm joint.
+            PlanError: ``start.q`` is not one finite angle per arm joint, or a ``turn`` for an
+                object that is not a box.
         """
         t0 = time.perf_counter()
         self._cspace_time, self._attempts = 0.0, 0
         if start is not None:
             start = Start(start_configuration(self.scene, start.q), start.X_WG)
-        ranked = self.rank(X_WO_pick, X_WO_place, start)
+        ranked = self.rank(X_WO_pick, X_WO_place, start, turn)
         tried: list[Candidate] = []
         chosen: int | None = None
         for r in ranked[:MAX_PREFLIGHTS]:
@@ -691,11 +709,18 @@ class PickPlacePlanner:
             np.zeros((0, nq)),
         )
 
-    def rank(self, X_WO_pick: SE3, X_WO_place: SE3, start: Start | None = None) -> list[Ranked]:
+    def rank(
+        self,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        start: Start | None = None,
+        turn: FloatArray | None = None,
+    ) -> list[Ranked]:
         """Every grasp candidate with its cheap tests, best first (see the module docstring).
 
         The wrist's margin is predicted from ``start`` (its last joint's angle and tool yaw),
-        by default from home.
+        by default from home; the candidates are those of a box turned by ``turn`` (see
+        :meth:`plan`) when given.
 
         Vectorised over the candidates: the pick poses ``X_WG = X_WO X_OG``, the place poses
         (of ``X_WO_goal X_OG`` and ``X_WO_goal Rz(π) X_OG``, the one whose yaw is nearer the
@@ -704,13 +729,14 @@ class PickPlacePlanner:
         """
         sc, robot = self.scene, self.scene.robot
         clearance = self.preflight.config.clearance
-        grasps, R_OG, p_OG = self._grasps, self._R_OG, self._p_OG
+        grasps, R_OG, p_OG, open_widths = self._grasp_set(turn)
         n = len(grasps)
         R_pick = np.einsum("ij,njk->nik", X_WO_pick.rotation().as_matrix(), R_OG)
         p_pick = p_OG @ X_WO_pick.rotation().as_matrix().T + X_WO_pick.translation()
         R_goal = X_WO_place.rotation().as_matrix()
-        options = [np.einsum("ij,njk->nik", R_goal @ T, R_OG) for T in (np.eye(3), _RZ_PI)]
-        p_options = [p_OG @ (R_goal @ T).T + X_WO_place.translation() for T in (np.eye(3), _RZ_PI)]
+        turns = (np.eye(3), HALF_TURNS[vertical_axis(X_WO_place.rotation())])
+        options = [np.einsum("ij,njk->nik", R_goal @ T, R_OG) for T in turns]
+        p_options = [p_OG @ (R_goal @ T).T + X_WO_place.translation() for T in turns]
         yaw_pick = np.arctan2(R_pick[:, 1, 0], R_pick[:, 0, 0])
         base = robot.p_W_base
         to_goal = X_WO_place.translation()[:2] - base[:2]
@@ -729,8 +755,8 @@ class PickPlacePlanner:
         # The open hand in each bin, per open width.
         near = np.full(n, np.inf)
         # The hand opens to the grasp's width at the pick, to the whole opening at the release.
-        for width in np.unique(self._open_widths):
-            sel = self._open_widths == width
+        for width in np.unique(open_widths):
+            sel = open_widths == width
             for R, p, bin_, w in (
                 (R_pick, p_pick, self.bin_at(X_WO_pick), width),
                 (R_place, p_place, self.bin_at(X_WO_place), self.config.open_width),
@@ -743,16 +769,17 @@ class PickPlacePlanner:
                 )
                 near[sel] = np.minimum(near[sel], d)
         # The wrist: the tool's yaw changes, less what the base swing carries along, are the
-        # last joint's turns over its axis' vertical component: from home to the pick (from
-        # the yaw of the home tool swung to face the pick), then over the transfer (the pick's
-        # yaw to the place's, less the swing between them: the via-point turns with the
-        # swing). Without a vertical last axis, or without limits, the margin is inf.
+        # last joint's turns over its axis' vertical component: from home to the pick (the
+        # first motion slerps the tool's orientation the shorter way round, so its yaw turns
+        # by the wrapped difference, of which the base swing to the pick carries part), then
+        # over the transfer (the pick's yaw to the place's, less the swing between them: the
+        # via-point turns with the swing). Without a vertical last axis, or without limits,
+        # the margin is inf.
         yaw0, azimuth0, q0 = self._home_yaw, self._home_azimuth, robot.q_home
         if start is not None:
             p0 = start.X_WG.translation() - base
             yaw0, azimuth0, q0 = yaw_of(start.X_WG.rotation()), math.atan2(p0[1], p0[0]), start.q
-        home_yaw = yaw0 + _wrap(np.arctan2(*from_pick.T[::-1]) - azimuth0)
-        to_pick = _wrap(yaw_pick - home_yaw)
+        to_pick = _wrap(yaw_pick - yaw0) - _wrap(np.arctan2(*from_pick.T[::-1]) - azimuth0)
         p_to = p_place[:, :2] - base[:2]
         swing = _wrap(np.arctan2(*p_to.T[::-1]) - np.arctan2(*from_pick.T[::-1]))
         transfer = _wrap(np.arctan2(R_place[:, 1, 0], R_place[:, 0, 0]) - yaw_pick - swing)
@@ -819,6 +846,45 @@ class PickPlacePlanner:
                     f"footprint; clearance {clearance * 1000:.0f} mm)"
                 )
         return "the open hand's footprint"
+
+    def _grasp_set(
+        self, turn: FloatArray | None
+    ) -> tuple[list[GraspCandidate], FloatArray, FloatArray, FloatArray]:
+        """The candidates (``turn`` None: the object's; else :meth:`turned_grasps`) with their
+        rotations R_OG (n, 3, 3), positions p_OG (n, 3) [m] and open widths (n,) [m]."""
+        if turn is None or np.array_equal(turn, np.eye(3)):
+            return self._grasps, self._R_OG, self._p_OG, self._open_widths
+        key = np.asarray(turn, dtype=np.float64).tobytes()
+        if key not in self._turned:
+            grasps = self.turned_grasps(turn)
+            self._turned[key] = (
+                grasps,
+                np.array([g.X_OG.rotation().as_matrix() for g in grasps]),
+                np.array([g.X_OG.translation() for g in grasps]),
+                np.array([g.open_width for g in grasps]),
+            )
+        return self._turned[key]
+
+    def turned_grasps(self, turn: FloatArray) -> list[GraspCandidate]:
+        """The grasp candidates of the box with its frame O turned to ``O' = O · turn``: those
+        of the box lying with O''s z up, sizes ``|turn|ᵀ h`` (:func:`~pickplace.planning.
+        candidates.box_grasps`), expressed in O (``X_OG = turn · X_O'G``).
+
+        Raises:
+            PlanError: The object is not a box (only a box's frame is turned onto a face).
+        """
+        box = self.scene.object.box_half_extents
+        if box is None:
+            raise PlanError(
+                f"only a box's grasps are turned onto another face; the object is "
+                f"{self.scene.object.kinds}; valid: turn=None"
+            )
+        R = np.asarray(turn, dtype=np.float64)
+        X_OO = SE3.from_rotation(SO3.from_matrix(R))
+        return [
+            replace(g, X_OG=X_OO @ g.X_OG)
+            for g in box_grasps(np.abs(R).T @ box, self.config.open_width, self.pad_half_length)
+        ]
 
     def grasps(self) -> list[GraspCandidate]:
         """The object's grasp candidates, in generation order (module docstring)."""

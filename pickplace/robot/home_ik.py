@@ -41,8 +41,11 @@ def home_candidates(
     orientation from :data:`HOME_SEEDS` deterministic seeds — the middle of each joint's range
     (0 for continuous joints; a zero seed fails where 0 is outside a range), then uniform draws
     over the middle half of the ranges — clamped to the limits each step. The seeds that reach
-    the pose within 0.1 mm and 1 mrad give the candidates (postures within
-    :data:`HOME_DISTINCT` of each other count once), ordered by their distance from the nearest
+    the pose within 0.1 mm and 1 mrad give the candidates, each also with its last joint at the
+    middle of its range where that only turns the tool about its approach axis (the home's yaw
+    about it is free: every plan turns the tool from there, and a wrist near an end of its
+    range has no room to turn one way; postures within :data:`HOME_DISTINCT` of each other
+    count once), ordered by their distance from the nearest
     joint limit relative to the range (continuous joints count ±π), largest first. Margin alone
     does not make a good home (``docs/physics-notes.md``): the scene loader
     (:mod:`pickplace.sim.loader`) chooses among them by the pre-flight of the nominal plan.
@@ -77,12 +80,31 @@ def home_candidates(
     def on_pose(e: np.ndarray) -> bool:
         return bool(np.linalg.norm(e[:3]) < 1e-4 and np.linalg.norm(e[3:]) < 1e-3)
 
+    z_goal = data.site_xmat[target].reshape(3, 3)[:, 2].copy()
+
+    def wrist_centred(q: np.ndarray) -> np.ndarray | None:
+        """``q`` with its last joint at the middle of its range, when that only turns the tool
+        about its approach axis (the tool stays on the home position, pointing the same way);
+        else None."""
+        q_c = q.copy()
+        q_c[-1] = mid[-1]
+        e = ik.error(q_c, p_goal, q_goal)
+        z = ik.data.site_xmat[site].reshape(3, 3)[:, 2]
+        if np.linalg.norm(e[:3]) < 1e-4 and float(np.linalg.norm(z - z_goal)) < 1e-3:
+            return q_c
+        return None
+
     found: list[tuple[float, np.ndarray]] = []
     for seed in seeds:
         q, _, reached = ik.solve(p_goal, q_goal, seed, _IK_ITERATIONS, on_pose)
-        if reached and all(np.max(np.abs(q - other)) > HOME_DISTINCT for _, other in found):
-            margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
-            found.append((margin, q.copy()))
+        if not reached:
+            continue
+        for posture in (q.copy(), wrist_centred(q)):
+            if posture is not None and all(
+                np.max(np.abs(posture - other)) > HOME_DISTINCT for _, other in found
+            ):
+                margin = float(np.min(np.minimum(posture - lo, hi - posture) / (hi - lo)))
+                found.append((margin, posture))
     if not found:
         raise RobotError(
             f"{src}: [arm] home: not given, and IK found no posture that puts the tool on the "

@@ -19,11 +19,14 @@ left, and then:
 
 A failure it does not take up ends the run as it would without it, with the same reason and
 text; so does a failure after the last attempt. When the brick does not come to rest in time,
-or it rests tilted, not flat on a face, or on a face that no turn of its lying shape puts
-down (:func:`~pickplace.geometry.box_resting_frame`: upside down, or on a side as tall as
-its height, it is the same box with its frame turned, and planned for that frame), or no
-plan is feasible from where it lies, the run ends with the
+or it rests tilted, not flat on a face, or no plan is feasible from where it lies, the run
+ends with the
 failure that was taken up, at its tick, its text saying why it could not be recovered.
+A box resting upside down, or on a side as tall as its height, is the same box with its frame
+turned (:func:`~pickplace.geometry.box_resting_frame`), planned for that frame; one standing
+on a face of another size (a brick on its end) is planned as the box lying with a turned
+frame's z up (:func:`~pickplace.geometry.upright_turn`, the planner's ``turn``) and placed
+standing so (:func:`standing_goal`).
 
 Which failures are recoverable (:data:`RECOVERABLE`): ``missed-grasp`` and ``dropped``, where
 the brick lies somewhere in the world the arm left intact; and an ``ik-failed`` that the
@@ -55,7 +58,7 @@ from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, require_positive
-from pickplace.geometry import FloatArray, box_resting_frame
+from pickplace.geometry import FloatArray, box_resting_frame, upright_turn
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
@@ -69,6 +72,26 @@ from pickplace.sim.verdict import (
     lying_tilt,
 )
 from pickplace.world.placements import footprint_inside
+
+
+def standing_goal(X_WO_goal: SE3, half_extents: FloatArray, turn: FloatArray) -> SE3:
+    """The goal of a box resting on another face: where ``X_WO_goal`` (the box lying with its
+    frame's z up, on a floor) puts the turned frame ``O' = O · turn``, raised or lowered so
+    that the box, sizes ``|turn|ᵀ h`` along O''s axes, rests on the same floor; in O.
+
+    Args:
+        X_WO_goal: The goal of the box lying, z up.
+        half_extents: Its half sizes h along O's axes [m].
+        turn: The turn of O that the box rests with the z of ``O · turn`` up (3, 3).
+    """
+    h = np.asarray(half_extents, dtype=np.float64)
+    R = np.asarray(turn, dtype=np.float64)
+    rise = float((np.abs(R).T @ h)[2] - h[2])
+    X_WOp = SE3.from_rotation_and_translation(
+        X_WO_goal.rotation(), X_WO_goal.translation() + np.array([0.0, 0.0, rise])
+    )
+    return X_WOp @ SE3.from_rotation(SO3.from_matrix(R).inverse())
+
 
 RECOVERABLE: frozenset[FailureReason] = frozenset(
     {FailureReason.MISSED_GRASP, FailureReason.DROPPED}
@@ -460,20 +483,20 @@ class Reattempt:
                 f"(at most {math.degrees(run.criteria.max_tilt):.0f} deg)",
             )
         # Upside down or on a side of the same size, the brick is the same box with its frame
-        # turned: the planner plans for that frame.
+        # turned: the planner plans for that frame. On a face of another size (on its end) it
+        # is planned as the box lying with a turned frame's z up, and placed standing so.
         box = run.scene.object.box_half_extents
         X_WO = X_WO_lying if box is None else box_resting_frame(X_WO_lying, box)
+        turn, X_WO_goal, standing = None, self.X_WO_goal, ""
         if X_WO is None:
             assert box is not None  # only a box has no resting frame
-            tall = 2000.0 * float(np.abs(X_WO_lying.rotation().as_matrix()[2, :]) @ box)
-            return self._give_up(
-                taken,
-                f"the brick came to rest standing {tall:.0f} mm tall, on a face no turn of "
-                f"its {2000 * box[2]:.0f} mm tall lying shape puts down: the planner's grasps "
-                "are of that shape",
-            )
+            X_WO = X_WO_lying
+            turn = upright_turn(X_WO.rotation())
+            X_WO_goal = standing_goal(self.X_WO_goal, box, turn)
+            tall = 2000.0 * float(np.abs(X_WO.rotation().as_matrix()[2, :]) @ box)
+            standing = f", standing {tall:.0f} mm tall (placed so)"
         start = Start(run.q_cmd.copy(), stop.X_WG_rest)
-        report = self.planner.plan(X_WO, self.X_WO_goal, start=start)
+        report = self.planner.plan(X_WO, X_WO_goal, start=start, turn=turn)
         if not report.feasible:
             p = X_WO.translation()
             return self._give_up(
@@ -488,7 +511,8 @@ class Reattempt:
             report,
             taken,
             f"plan '{{label}}' (candidate {report.chosen + 1} of {len(report.candidates)}) "
-            f"picks the brick where it rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m",
+            f"picks the brick where it rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
+            f"{standing}",
         )
 
     def _put_in_place(
