@@ -18,7 +18,8 @@ by tests that need no IK, in this order:
 
 A candidate failing 1 or 2 is not pre-flighted; one failing 3 is ranked after those that pass.
 Among the passing, the smaller tilt first, then the smaller torque of the weight about the pads
-(:func:`~pickplace.planning.candidates.gravity_torque`), then the narrower width, then the
+(:func:`~pickplace.planning.candidates.gravity_torque`), then the shorter pendulum (the centre
+of mass's distance from the pad axis), then the narrower width, then the
 smaller wrist travel (the nearest yaw, as every plan chose before candidates existed). The best
 :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own controller
 (:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is taken. If
@@ -64,8 +65,10 @@ from pickplace.errors import ObjectError, PlanError
 from pickplace.geometry import pose_error_W_floats, require_pose
 from pickplace.planning.candidates import (
     GRAVITY,
+    HAND_OBJECT_MARGIN,
     GraspCandidate,
     HandFootprint,
+    HandObjectGaps,
     object_grasps,
 )
 from pickplace.planning.cspace import (
@@ -361,6 +364,9 @@ class Ranked:
             last joint without limits).
         wrist_travel: Predicted turn of the last joint, home to pick plus the transfer [rad].
         torque: Torque of the object's weight about the pad axis [N m].
+        arm: Distance of the object's centre of mass from the pad axis [m]: the pendulum an
+            acceleration of the hand swings it on (pads on a curved side touch it along a
+            line, which resists no turn about that axis).
     """
 
     grasp: GraspCandidate
@@ -369,6 +375,7 @@ class Ranked:
     wrist_margin: float
     wrist_travel: float
     torque: float
+    arm: float
 
     def key(self) -> tuple[bool | float, ...]:
         """Sort key: passing first, then the order of the module docstring; failing ones
@@ -380,6 +387,7 @@ class Ranked:
             self.wrist_margin < WRIST_MARGIN,
             abs(self.grasp.tilt),
             round(self.torque, 9),
+            round(self.arm, 9),
             round(self.grasp.width, 9),
             self.wrist_travel,
             -self.clearance,
@@ -453,24 +461,20 @@ class PickPlacePlanner:
         )
         # The last joint turns the tool's yaw by its own angle times its axis' z component.
         self.wrist_axis_z = float(kin.data.xaxis[robot.n_joints - 1][2])
-        self.hand = HandFootprint(
-            self.preflight.model,
-            robot.gripper_geom_ids,
-            [scene.geom_name(int(g)) for g in robot.gripper_geom_ids],
-            robot.tool_site_id,
-            scene.gripper_qpos_adr,
-            robot.qpos_for_width,
-            (robot.arm_qpos_adr, robot.q_home),
-        )
-        pad_hand = HandFootprint(
-            self.preflight.model,
-            pads,
-            [scene.geom_name(int(g)) for g in pads],
-            robot.tool_site_id,
-            scene.gripper_qpos_adr,
-            robot.qpos_for_width,
-            (robot.arm_qpos_adr, robot.q_home),
-        )
+
+        def footprint(ids: np.ndarray) -> HandFootprint:
+            return HandFootprint(
+                self.preflight.model,
+                ids,
+                [scene.geom_name(int(g)) for g in ids],
+                robot.tool_site_id,
+                scene.gripper_qpos_adr,
+                robot.qpos_for_width,
+                (robot.arm_qpos_adr, robot.q_home),
+            )
+
+        self.hand = footprint(robot.gripper_geom_ids)
+        pad_hand = footprint(pads)
         pad_corners = pad_hand.corners_G(self.config.open_width)
         pad_x, pad_z = pad_corners[..., 0], pad_corners[..., 2]
         self.pad_half_length = 0.5 * float(np.max(pad_x.max(axis=1) - pad_x.min(axis=1)))
@@ -478,7 +482,10 @@ class PickPlacePlanner:
         self.pad_friction = mu
         self.p_O_com = scene.model.body_ipos[scene.brick_body_id].copy()
         self._grasps = self.grasps()
-        if not self._grasps:
+        if self._grasps:
+            others = robot.gripper_geom_ids[~np.isin(robot.gripper_geom_ids, pads)]
+            self._grasps = self._clear_of_hand(HandObjectGaps(footprint(others), scene.object))
+        else:
             shape = scene.object
             narrowest = 2.0 * shape.min_footprint_half
             raise ObjectError(
@@ -491,6 +498,10 @@ class PickPlacePlanner:
         self._R_OG = np.array([g.X_OG.rotation().as_matrix() for g in self._grasps])
         self._p_OG = np.array([g.X_OG.translation() for g in self._grasps])
         self._open_widths = np.array([g.open_width for g in self._grasps])
+        r_O = self.p_O_com - self._p_OG  # the centre of mass from the tool, in O
+        y_O = self._R_OG[:, :, 1]
+        along = np.einsum("ni,ni->n", r_O, y_O)[:, None] * y_O
+        self._arms = np.linalg.norm(r_O - along, axis=1)
         self._bin_frames = {
             b.name: (b.X_WB.inverse().rotation().as_matrix(), b.X_WB.inverse().translation())
             for b in (src, dst)
@@ -779,7 +790,13 @@ class PickPlacePlanner:
                 problem = "footprint"  # worded below, for the best-ranked only
             out.append(
                 Ranked(
-                    g, problem, float(near[i]), float(margin[i]), float(travel[i]), float(torque[i])
+                    g,
+                    problem,
+                    float(near[i]),
+                    float(margin[i]),
+                    float(travel[i]),
+                    float(torque[i]),
+                    float(self._arms[i]),
                 )
             )
         out.sort(key=Ranked.key)
@@ -829,6 +846,38 @@ class PickPlacePlanner:
                 (self.pad_half_length, self.pad_half_height),
                 self.pad_friction,
             )
+        )
+
+    def _clear_of_hand(self, gaps: HandObjectGaps) -> list[GraspCandidate]:
+        """The grasps whose hand, but for the pads, keeps :data:`~pickplace.planning.
+        candidates.HAND_OBJECT_MARGIN` from the object, open around it and closed on it
+        (:class:`~pickplace.planning.candidates.HandObjectGaps`), in their order.
+
+        Raises:
+            ObjectError: None does: the message names the nearest geom of the best one.
+        """
+        grasps = self._grasps
+        R_OG = np.array([g.X_OG.rotation().as_matrix() for g in grasps])
+        p_OG = np.array([g.X_OG.translation() for g in grasps])
+        margin = HAND_OBJECT_MARGIN
+        closed = gaps.gaps(R_OG, p_OG, np.array([g.width for g in grasps]), margin)
+        opened = gaps.gaps(R_OG, p_OG, np.array([g.open_width for g in grasps]), margin)
+        near = np.minimum(closed[0], opened[0])
+        keep = near >= margin
+        if keep.any():
+            return [g for g, k in zip(grasps, keep, strict=True) if k]
+        i = int(np.argmax(near))
+        is_closed = bool(closed[0][i] <= opened[0][i])
+        dists, geoms = closed if is_closed else opened
+        dist, geom = float(dists[i]), int(geoms[i])
+        shape = self.scene.object
+        state = "closed on it" if is_closed else "open around it"
+        raise ObjectError(
+            f"the object ({shape.kinds}, {2 * shape.half_extents[2] * 1000:.0f} mm tall) is "
+            f"touched by more of the hand than its pads at every grasp: at the best "
+            f"({grasps[i].label}) {gaps.hand.names[geom]} with the fingers {state} comes "
+            f"within {dist * 1000:.1f} mm of it; valid: an object whose sides the pads reach "
+            "with the rest of the hand clear of it"
         )
 
     def timed_plan(
