@@ -20,7 +20,9 @@ whose width plus :data:`PAD_CLEARANCE` on each side the gripper opens to:
 The cheap tests (:class:`HandFootprint`, :func:`gravity_torque`) need no IK: the open hand's
 collision boxes placed at the grasp against the bin's walls and floor, and the object's weight
 about the pad axis. The wrist's margin needs the arm, and is the planner's
-(:mod:`pickplace.planning.planner`).
+(:mod:`pickplace.planning.planner`). :class:`HandObjectGaps` does not depend on where the
+object lies: the planner drops, once, the candidates whose hand touches the object with more
+than its pads.
 """
 
 from __future__ import annotations
@@ -148,7 +150,9 @@ half a turn about O's z (the wrist turns give the other half)."""
 GRASP_HEIGHT_FRACTIONS = (0.0, 0.5, 1.0)
 """Offsets of the pads' centre up the object's side, as fractions of the largest that keeps
 the pad on the contact patch [-]: centred first, then higher (the fingertips farther from
-the floor)."""
+the floor), up to the pad's top level with the patch's top (the hand above the pads then
+farthest down past the object's top: a tall object clears a linkage's knuckles or a palm
+only there, :class:`HandObjectGaps`)."""
 
 
 def object_grasps(
@@ -450,6 +454,7 @@ class HandObjectGaps:
             )
         self.hand = hand
         self.shape = shape
+        self._object_ids = [int(g) for g in shape.geom_ids]
 
     def gaps(
         self, R_OG: np.ndarray, p_OG: np.ndarray, widths: np.ndarray, margin: float
@@ -472,9 +477,10 @@ class HandObjectGaps:
         for width in np.unique(widths):
             sel = np.flatnonzero(widths == width)
             bound = self._lower_bounds(R_OG[sel], p_OG[sel], float(width))  # (m, k)
-            for row, col in zip(*np.nonzero(bound < margin), strict=True):
-                i = int(sel[row])
-                bound[row, col] = self._exact(R_OG[i], p_OG[i], float(width), int(col), margin)
+            near = bound < margin
+            for row in np.flatnonzero(near.any(axis=1)):
+                i, cols = int(sel[row]), np.flatnonzero(near[row])
+                bound[row, cols] = self._exact(R_OG[i], p_OG[i], float(width), cols, margin)
             k = np.argmin(bound, axis=1)
             out[sel] = bound[np.arange(len(sel)), k]
             which[sel] = k
@@ -482,7 +488,8 @@ class HandObjectGaps:
 
     def _lower_bounds(self, R_OG: np.ndarray, p_OG: np.ndarray, width: float) -> np.ndarray:
         """Separating-axis lower bounds of each geom box's distance from the object, (m, k)."""
-        P = np.einsum("nij,kcj->nkci", R_OG, self.hand.corners_G(width)) + p_OG[:, None, None]
+        P_G = self.hand.corners_G(width)  # (k, 8, 3)
+        P = P_G @ R_OG.transpose(0, 2, 1)[:, None] + p_OG[:, None, None]  # (m, k, 8, 3)
         centre = P.mean(axis=2)  # (m, k, 3)
         edges = P[:, :, [1, 2, 4]] - P[:, :, :1]  # the box's three axes (corner bits 0, 1, 2)
         radial = centre - self.shape.aabb_center
@@ -494,24 +501,28 @@ class HandObjectGaps:
         axes = np.where(valid[..., None], axes / np.where(valid[..., None], norm, 1.0), 0.0)
         axes[~valid] = (0.0, 0.0, 1.0)
         reach = self.shape.supports(axes.reshape(-1, 3)).reshape(axes.shape[:3])
-        low = np.einsum("nkci,nkai->nkac", P, axes).min(axis=-1)  # the box's least along each
+        low = (P @ axes.transpose(0, 1, 3, 2)).min(axis=2)  # the box's least along each axis
         return np.where(valid, low - reach, -np.inf).max(axis=2)
 
     def _exact(
-        self, R_OG: np.ndarray, p_OG: np.ndarray, width: float, k: int, margin: float
-    ) -> float:
-        """The exact distance of the hand's geom ``k`` from the object's geoms [m], capped at
-        ``margin``."""
+        self, R_OG: np.ndarray, p_OG: np.ndarray, width: float, ks: np.ndarray, margin: float
+    ) -> np.ndarray:
+        """The exact distances of the hand's geoms ``ks`` from the object [m] (the nearest of
+        its geoms), each capped at ``margin``, at one grasp."""
         h = self.hand
         m, d = h.model, h.pose(width)
-        R_WG = d.site_xmat[h.tool_site_id].reshape(3, 3)
-        p_WG = d.site_xpos[h.tool_site_id]
-        R_WO = R_WG @ R_OG.T
-        p_WO = p_WG - R_WO @ p_OG
-        best = margin
+        R_WO = d.site_xmat[h.tool_site_id].reshape(3, 3) @ R_OG.T
+        p_WO = d.site_xpos[h.tool_site_id] - R_WO @ p_OG
         for g, gid in zip(self.shape.geoms, self.shape.geom_ids, strict=True):
             d.geom_xpos[gid] = R_WO @ g.p_Og + p_WO
             d.geom_xmat[gid] = (R_WO @ g.R_Og).reshape(-1)
-            dist = mujoco.mj_geomDistance(m, d, int(h.geom_ids[k]), int(gid), margin, None)
-            best = min(best, float(dist))
-        return best
+        hand = h.geom_ids[ks].tolist()
+        return np.array(
+            [
+                min(
+                    [margin]
+                    + [mujoco.mj_geomDistance(m, d, a, b, margin, None) for b in self._object_ids]
+                )
+                for a in hand
+            ]
+        )
