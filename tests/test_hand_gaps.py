@@ -110,3 +110,21 @@ def test_the_brick_keeps_every_grasp_candidate(robot: str) -> None:
     are those it had before the hand was checked against the object."""
     _, planner = _planner(robot, "brick")
     assert [g.label for g in planner._grasps] == [g.label for g in planner.grasps()]
+
+
+@pytest.mark.parametrize("robot", ["panda-hand", "ur5e-2f85", "menagerie-panda-hand"])
+def test_the_can_is_held_nearest_its_centre_of_mass_the_hand_allows(robot: str) -> None:
+    """Pads on a cylinder's side touch it along a line, which does not stop it swinging about
+    the pad axis: the plan's grasp is the vertical one, of those the hand leaves, whose pad
+    axis passes nearest the can's centre of mass (its middle: the lowest such grasp)."""
+    scene, task = build_task(RunRequest(robot=robot, object="can"))
+    planner = PickPlacePlanner(scene, "qp")
+    assert task.planning is not None and task.planning.chosen is not None
+    chosen = task.planning.candidates[task.planning.chosen].label
+    grasp = next(g for g in planner._grasps if g.label == chosen)
+    vertical = [g for g in planner._grasps if g.tilt == 0.0]
+    assert grasp.tilt == 0.0
+    com_z = float(scene.model.body_ipos[scene.brick_body_id][2])
+    heights = [abs(float(g.X_OG.translation()[2]) - com_z) for g in vertical]
+    assert abs(float(grasp.X_OG.translation()[2]) - com_z) == pytest.approx(min(heights))
+    assert min(heights) > 0.0  # the middle itself puts more of the hand on the can
