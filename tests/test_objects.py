@@ -219,6 +219,15 @@ BAD_OBJECTS = {
         '<geom type="cylinder" size="0.06 0.05" mass="0.3"/></body></worldbody></mujoco>',
         "the object (cylinder) is at least 120 mm across every horizontal direction",
     ),
+    # A 40 mm tall block, a post 40 mm across rising 150 mm from its top: the pads close on the
+    # block, and at every grasp the post runs into the hand above them.
+    "pole.xml": (
+        '<mujoco><worldbody><body name="o"><freejoint/>'
+        '<geom type="box" size="0.025 0.025 0.02" mass="0.2"/>'
+        '<geom type="cylinder" size="0.02 0.075" pos="0 0 0.095" mass="0.05"/>'
+        "</body></worldbody></mujoco>",
+        "is touched by more of the hand than its pads at every grasp",
+    ),
 }
 
 

@@ -22,7 +22,9 @@ where it does not):
 The cheap tests (:class:`HandFootprint`, :func:`gravity_torque`) need no IK: the open hand's
 collision boxes placed at the grasp against the bin's walls and floor, and the object's weight
 about the pad axis. The wrist's margin needs the arm, and is the planner's
-(:mod:`pickplace.planning.planner`).
+(:mod:`pickplace.planning.planner`). :class:`HandObjectGaps` does not depend on where the
+object lies: the planner drops, once, the candidates whose hand touches the object with more
+than its pads.
 """
 
 from __future__ import annotations
@@ -149,10 +151,12 @@ GRASP_YAWS = 12
 """Closing directions tried around an object that is not the brick: this many, evenly over
 half a turn about O's z (the wrist turns give the other half)."""
 
-GRASP_HEIGHT_FRACTIONS = (0.0, 0.5)
+GRASP_HEIGHT_FRACTIONS = (0.0, 0.5, 1.0)
 """Offsets of the pads' centre up the object's side, as fractions of the largest that keeps
 the pad on the contact patch [-]: centred first, then higher (the fingertips farther from
-the floor)."""
+the floor), up to the pad's top level with the patch's top (the hand above the pads then
+farthest down past the object's top: a tall object clears a linkage's knuckles or a palm
+only there, :class:`HandObjectGaps`)."""
 
 
 def object_grasps(
@@ -324,15 +328,24 @@ class HandFootprint:
         adr, q = q_arm
         self.data.qpos[adr] = q
         self._corners: dict[float, np.ndarray] = {}
+        self._posed: float | None = None
+
+    def pose(self, width: float) -> mujoco.MjData:
+        """:attr:`data` with the fingers at gap ``width`` [m] and its kinematics computed
+        (the bodies' and geoms' poses; a geom's pose written by a caller stands until the
+        next width)."""
+        if self._posed != width:
+            self.data.qpos[self.gripper_qpos_adr] = self.qpos_for_width(width)
+            mujoco.mj_kinematics(self.model, self.data)
+            self._posed = width
+        return self.data
 
     def corners_G(self, width: float) -> np.ndarray:
         """Corners of every geom's box in G with the fingers at gap ``width`` [m], (k, 8, 3)."""
         cached = self._corners.get(width)
         if cached is not None:
             return cached
-        m, d = self.model, self.data
-        d.qpos[self.gripper_qpos_adr] = self.qpos_for_width(width)
-        mujoco.mj_kinematics(m, d)
+        m, d = self.model, self.pose(width)
         R_WG = d.site_xmat[self.tool_site_id].reshape(3, 3)
         p_WG = d.site_xpos[self.tool_site_id]
         g = self.geom_ids
@@ -409,3 +422,112 @@ class HandFootprint:
         p_W = bin_.X_WB.apply(p_B)
         point = (float(p_W[0]), float(p_W[1]), float(p_W[2]))
         return FootprintProblem(self.names[int(k)], where, float(distance), point)
+
+
+HAND_OBJECT_MARGIN = 0.0
+"""Least distance between the object and any of the hand's collision geoms other than the
+pads, open around it and closed on it [m]: none may touch it, so that the pads alone hold
+it (a linkage's knuckles on a tall can's side, a palm on its top carry it instead). Zero,
+not more: a finger's other geoms beside the pads (a second pad box, a fingertip's pad
+strips) lie flush with the pads, 1.5 mm from a face the pads close on.
+"""
+
+
+class HandObjectGaps:
+    """The hand's collision geoms other than the pads against the object held by a grasp.
+
+    The hand's geoms (a :class:`HandFootprint` of them, which places them in the tool frame
+    G at a finger gap) and the object's collision geoms stand as a grasp ``X_OG`` puts them,
+    with the fingers at the object's width (closed on it) and at the grasp's opening. First a
+    lower bound for every candidate at once: each geom's box separated from the object's
+    support function along the box's face normals, O's z and the direction from the object's
+    centre to the box (horizontal and not); then, where that bound is below the margin, the
+    exact distance (``mujoco.mj_geomDistance``, the hand as the model has it and the object's
+    geoms placed by the grasp). A geom that touches the object there would carry what the
+    pads should (a linkage's knuckles on a tall can, a palm on its top).
+
+    Args:
+        hand: The hand's collision geoms other than the pads, as boxes in G.
+        shape: The object's geometry (its geom ids in ``hand.model``).
+    """
+
+    def __init__(self, hand: HandFootprint, shape: ObjectGeometry) -> None:
+        if len(shape.geom_ids) != len(shape.geoms):
+            raise ValueError(
+                f"the object has {len(shape.geoms)} geoms but {len(shape.geom_ids)} geom ids; "
+                "valid: one id per geom"
+            )
+        self.hand = hand
+        self.shape = shape
+        self._object_ids = [int(g) for g in shape.geom_ids]
+
+    def gaps(
+        self, R_OG: np.ndarray, p_OG: np.ndarray, widths: np.ndarray, margin: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The smallest distance of the hand's geoms from the object at each grasp.
+
+        Args:
+            R_OG: The grasps' tool orientations in O, (n, 3, 3).
+            p_OG: Their tool positions in O [m], (n, 3).
+            widths: The finger gap at each [m], (n,).
+            margin: Below this the distance is exact [m]; above it a lower bound.
+
+        Returns:
+            Per grasp the smallest distance [m] and the index of that geom among the hand's,
+            shapes (n,), (n,).
+        """
+        n = len(R_OG)
+        out = np.full(n, np.inf)
+        which = np.zeros(n, dtype=np.intp)
+        for width in np.unique(widths):
+            sel = np.flatnonzero(widths == width)
+            bound = self._lower_bounds(R_OG[sel], p_OG[sel], float(width))  # (m, k)
+            near = bound < margin
+            for row in np.flatnonzero(near.any(axis=1)):
+                i, cols = int(sel[row]), np.flatnonzero(near[row])
+                bound[row, cols] = self._exact(R_OG[i], p_OG[i], float(width), cols, margin)
+            k = np.argmin(bound, axis=1)
+            out[sel] = bound[np.arange(len(sel)), k]
+            which[sel] = k
+        return out, which
+
+    def _lower_bounds(self, R_OG: np.ndarray, p_OG: np.ndarray, width: float) -> np.ndarray:
+        """Separating-axis lower bounds of each geom box's distance from the object, (m, k)."""
+        P_G = self.hand.corners_G(width)  # (k, 8, 3)
+        P = P_G @ R_OG.transpose(0, 2, 1)[:, None] + p_OG[:, None, None]  # (m, k, 8, 3)
+        centre = P.mean(axis=2)  # (m, k, 3)
+        edges = P[:, :, [1, 2, 4]] - P[:, :, :1]  # the box's three axes (corner bits 0, 1, 2)
+        radial = centre - self.shape.aabb_center
+        flat = radial * np.array([1.0, 1.0, 0.0])
+        z = np.broadcast_to(np.array([0.0, 0.0, 1.0]), centre.shape)[:, :, None]
+        axes = np.concatenate([edges, -edges, radial[:, :, None], flat[:, :, None], z, -z], axis=2)
+        norm = np.linalg.norm(axes, axis=-1, keepdims=True)
+        valid = norm[..., 0] > 1e-12  # a flat box has a zero edge; a centred box no radial
+        axes = np.where(valid[..., None], axes / np.where(valid[..., None], norm, 1.0), 0.0)
+        axes[~valid] = (0.0, 0.0, 1.0)
+        reach = self.shape.supports(axes.reshape(-1, 3)).reshape(axes.shape[:3])
+        low = (P @ axes.transpose(0, 1, 3, 2)).min(axis=2)  # the box's least along each axis
+        return np.where(valid, low - reach, -np.inf).max(axis=2)
+
+    def _exact(
+        self, R_OG: np.ndarray, p_OG: np.ndarray, width: float, ks: np.ndarray, margin: float
+    ) -> np.ndarray:
+        """The exact distances of the hand's geoms ``ks`` from the object [m] (the nearest of
+        its geoms), each capped at ``margin``, at one grasp."""
+        h = self.hand
+        m, d = h.model, h.pose(width)
+        R_WO = d.site_xmat[h.tool_site_id].reshape(3, 3) @ R_OG.T
+        p_WO = d.site_xpos[h.tool_site_id] - R_WO @ p_OG
+        for g, gid in zip(self.shape.geoms, self.shape.geom_ids, strict=True):
+            d.geom_xpos[gid] = R_WO @ g.p_Og + p_WO
+            d.geom_xmat[gid] = (R_WO @ g.R_Og).reshape(-1)
+        hand = h.geom_ids[ks].tolist()
+        return np.array(
+            [
+                min(
+                    [margin]
+                    + [mujoco.mj_geomDistance(m, d, a, b, margin, None) for b in self._object_ids]
+                )
+                for a in hand
+            ]
+        )

@@ -20,7 +20,8 @@ A candidate failing 1 or 2 is not pre-flighted; one failing 3 is ranked after th
 Among the passing, those with the whole pad clearance a side first (a grasp the gripper opens
 to only with less, :data:`~pickplace.robot.calibration.MIN_PAD_CLEARANCE` at least, after
 them), then the smaller tilt, then the smaller torque of the weight about the pads
-(:func:`~pickplace.planning.candidates.gravity_torque`), then the narrower width, then the
+(:func:`~pickplace.planning.candidates.gravity_torque`), then the shorter pendulum (the centre
+of mass's distance from the pad axis), then the narrower width, then the
 smaller wrist travel (the nearest yaw, as every plan chose before candidates existed). The best
 :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own controller
 (:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is taken. If
@@ -72,8 +73,10 @@ from pickplace.geometry import (
 )
 from pickplace.planning.candidates import (
     GRAVITY,
+    HAND_OBJECT_MARGIN,
     GraspCandidate,
     HandFootprint,
+    HandObjectGaps,
     box_grasps,
     object_grasps,
 )
@@ -369,6 +372,9 @@ class Ranked:
             last joint without limits).
         wrist_travel: Predicted turn of the last joint, home to pick plus the transfer [rad].
         torque: Torque of the object's weight about the pad axis [N m].
+        arm: Distance of the object's centre of mass from the pad axis [m]: the pendulum an
+            acceleration of the hand swings it on (pads on a curved side touch it along a
+            line, which resists no turn about that axis).
     """
 
     grasp: GraspCandidate
@@ -377,6 +383,7 @@ class Ranked:
     wrist_margin: float
     wrist_travel: float
     torque: float
+    arm: float
 
     def key(self) -> tuple[bool | float, ...]:
         """Sort key: passing first, then the order of the module docstring; failing ones
@@ -389,10 +396,42 @@ class Ranked:
             self.grasp.open_width - self.grasp.width < 2.0 * PAD_CLEARANCE - 1e-12,
             abs(self.grasp.tilt),
             round(self.torque, 9),
+            round(self.arm, 9),
             round(self.grasp.width, 9),
             self.wrist_travel,
             -self.clearance,
         )
+
+
+@dataclass(frozen=True)
+class GraspSet:
+    """Grasp candidates with what the ranking computes from them, once.
+
+    Attributes:
+        grasps: The candidates, in generation order.
+        R_OG: Their rotations in the object frame (n, 3, 3).
+        p_OG: Their tool positions in the object frame (n, 3) [m].
+        open_widths: Their open widths (n,) [m].
+        arms: The centre of mass's distance from each pad axis (n,) [m]: the pendulum a held
+            object swings on about it.
+    """
+
+    grasps: list[GraspCandidate]
+    R_OG: FloatArray
+    p_OG: FloatArray
+    open_widths: FloatArray
+    arms: FloatArray
+
+    @classmethod
+    def of(cls, grasps: list[GraspCandidate], p_O_com: FloatArray) -> GraspSet:
+        """The set of ``grasps`` of an object whose centre of mass is at ``p_O_com`` [m]."""
+        R_OG = np.array([g.X_OG.rotation().as_matrix() for g in grasps])
+        p_OG = np.array([g.X_OG.translation() for g in grasps])
+        r_O = p_O_com - p_OG  # the centre of mass from the tool, in O
+        y_O = R_OG[:, :, 1]
+        along = np.einsum("ni,ni->n", r_O, y_O)[:, None] * y_O
+        arms = np.linalg.norm(r_O - along, axis=1)
+        return cls(grasps, R_OG, p_OG, np.array([g.open_width for g in grasps]), arms)
 
 
 class PickPlacePlanner:
@@ -462,24 +501,20 @@ class PickPlacePlanner:
         )
         # The last joint turns the tool's yaw by its own angle times its axis' z component.
         self.wrist_axis_z = float(kin.data.xaxis[robot.n_joints - 1][2])
-        self.hand = HandFootprint(
-            self.preflight.model,
-            robot.gripper_geom_ids,
-            [scene.geom_name(int(g)) for g in robot.gripper_geom_ids],
-            robot.tool_site_id,
-            scene.gripper_qpos_adr,
-            robot.qpos_for_width,
-            (robot.arm_qpos_adr, robot.q_home),
-        )
-        pad_hand = HandFootprint(
-            self.preflight.model,
-            pads,
-            [scene.geom_name(int(g)) for g in pads],
-            robot.tool_site_id,
-            scene.gripper_qpos_adr,
-            robot.qpos_for_width,
-            (robot.arm_qpos_adr, robot.q_home),
-        )
+
+        def footprint(ids: np.ndarray) -> HandFootprint:
+            return HandFootprint(
+                self.preflight.model,
+                ids,
+                [scene.geom_name(int(g)) for g in ids],
+                robot.tool_site_id,
+                scene.gripper_qpos_adr,
+                robot.qpos_for_width,
+                (robot.arm_qpos_adr, robot.q_home),
+            )
+
+        self.hand = footprint(robot.gripper_geom_ids)
+        pad_hand = footprint(pads)
         pad_corners = pad_hand.corners_G(self.config.open_width)
         pad_x, pad_z = pad_corners[..., 0], pad_corners[..., 2]
         self.pad_half_length = 0.5 * float(np.max(pad_x.max(axis=1) - pad_x.min(axis=1)))
@@ -487,7 +522,11 @@ class PickPlacePlanner:
         self.pad_friction = mu
         self.p_O_com = scene.model.body_ipos[scene.brick_body_id].copy()
         self._grasps = self.grasps()
-        if not self._grasps:
+        if self._grasps:
+            others = robot.gripper_geom_ids[~np.isin(robot.gripper_geom_ids, pads)]
+            self._hand_gaps = HandObjectGaps(footprint(others), scene.object)
+            self._grasps = self._clear_of_hand(self._grasps)
+        else:
             shape = scene.object
             narrowest = 2.0 * shape.min_footprint_half
             raise ObjectError(
@@ -497,12 +536,8 @@ class PickPlacePlanner:
                 f"{(self.config.open_width - 2 * MIN_PAD_CLEARANCE) * 1000:.0f} mm across "
                 "(the opening less the pad clearance a side)"
             )
-        self._R_OG = np.array([g.X_OG.rotation().as_matrix() for g in self._grasps])
-        self._p_OG = np.array([g.X_OG.translation() for g in self._grasps])
-        self._open_widths = np.array([g.open_width for g in self._grasps])
-        self._turned: dict[
-            bytes, tuple[list[GraspCandidate], FloatArray, FloatArray, FloatArray]
-        ] = {}
+        self._set = GraspSet.of(self._grasps, self.p_O_com)
+        self._turned: dict[bytes, GraspSet] = {}
         self._bin_frames = {
             b.name: (b.X_WB.inverse().rotation().as_matrix(), b.X_WB.inverse().translation())
             for b in (src, dst)
@@ -527,7 +562,7 @@ class PickPlacePlanner:
         geoms = robot.gripper_geom_ids
         hand = np.linalg.norm(d.geom_xpos[geoms] - p_tool, axis=1) + m.geom_rbound[geoms]
         brick = self.scene.object.bounding_radius
-        grasp = max(float(np.linalg.norm(p)) for p in self._p_OG)
+        grasp = max(float(np.linalg.norm(p)) for p in self._set.p_OG)
         return float(max(hand.max(), grasp + brick))
 
     def plan(
@@ -729,7 +764,9 @@ class PickPlacePlanner:
         """
         sc, robot = self.scene, self.scene.robot
         clearance = self.preflight.config.clearance
-        grasps, R_OG, p_OG, open_widths = self._grasp_set(turn)
+        candidates = self._grasp_set(turn)
+        grasps, R_OG, p_OG = candidates.grasps, candidates.R_OG, candidates.p_OG
+        open_widths = candidates.open_widths
         n = len(grasps)
         R_pick = np.einsum("ij,njk->nik", X_WO_pick.rotation().as_matrix(), R_OG)
         p_pick = p_OG @ X_WO_pick.rotation().as_matrix().T + X_WO_pick.translation()
@@ -806,7 +843,13 @@ class PickPlacePlanner:
                 problem = "footprint"  # worded below, for the best-ranked only
             out.append(
                 Ranked(
-                    g, problem, float(near[i]), float(margin[i]), float(travel[i]), float(torque[i])
+                    g,
+                    problem,
+                    float(near[i]),
+                    float(margin[i]),
+                    float(travel[i]),
+                    float(torque[i]),
+                    float(candidates.arms[i]),
                 )
             )
         out.sort(key=Ranked.key)
@@ -847,22 +890,14 @@ class PickPlacePlanner:
                 )
         return "the open hand's footprint"
 
-    def _grasp_set(
-        self, turn: FloatArray | None
-    ) -> tuple[list[GraspCandidate], FloatArray, FloatArray, FloatArray]:
-        """The candidates (``turn`` None: the object's; else :meth:`turned_grasps`) with their
-        rotations R_OG (n, 3, 3), positions p_OG (n, 3) [m] and open widths (n,) [m]."""
+    def _grasp_set(self, turn: FloatArray | None) -> GraspSet:
+        """The candidates (``turn`` None: the object's; else :meth:`turned_grasps`), with what
+        the ranking needs of them."""
         if turn is None or np.array_equal(turn, np.eye(3)):
-            return self._grasps, self._R_OG, self._p_OG, self._open_widths
+            return self._set
         key = np.asarray(turn, dtype=np.float64).tobytes()
         if key not in self._turned:
-            grasps = self.turned_grasps(turn)
-            self._turned[key] = (
-                grasps,
-                np.array([g.X_OG.rotation().as_matrix() for g in grasps]),
-                np.array([g.X_OG.translation() for g in grasps]),
-                np.array([g.open_width for g in grasps]),
-            )
+            self._turned[key] = GraspSet.of(self.turned_grasps(turn), self.p_O_com)
         return self._turned[key]
 
     def turned_grasps(self, turn: FloatArray) -> list[GraspCandidate]:
@@ -871,7 +906,9 @@ class PickPlacePlanner:
         candidates.box_grasps`), expressed in O (``X_OG = turn · X_O'G``).
 
         Raises:
-            PlanError: The object is not a box (only a box's frame is turned onto a face).
+            PlanError: The object is not a box (only a box's frame is turned onto a face), or
+                the gripper opens to none of its turned face pairs.
+            ObjectError: More of the hand than its pads touches the box at every one of them.
         """
         box = self.scene.object.box_half_extents
         if box is None:
@@ -881,10 +918,16 @@ class PickPlacePlanner:
             )
         R = np.asarray(turn, dtype=np.float64)
         X_OO = SE3.from_rotation(SO3.from_matrix(R))
-        return [
+        turned = [
             replace(g, X_OG=X_OO @ g.X_OG)
             for g in box_grasps(np.abs(R).T @ box, self.config.open_width, self.pad_half_length)
         ]
+        if not turned:
+            raise PlanError(
+                f"the gripper opens to {self.config.open_width * 1000:.0f} mm, too little for "
+                "any pair of the box's faces beside the one it rests on; valid: the box lying"
+            )
+        return self._clear_of_hand(turned)
 
     def grasps(self) -> list[GraspCandidate]:
         """The object's grasp candidates, in generation order (module docstring)."""
@@ -895,6 +938,38 @@ class PickPlacePlanner:
                 (self.pad_half_length, self.pad_half_height),
                 self.pad_friction,
             )
+        )
+
+    def _clear_of_hand(self, grasps: list[GraspCandidate]) -> list[GraspCandidate]:
+        """The ``grasps`` whose hand, but for the pads, keeps :data:`~pickplace.planning.
+        candidates.HAND_OBJECT_MARGIN` from the object, open around it and closed on it
+        (:class:`~pickplace.planning.candidates.HandObjectGaps`), in their order.
+
+        Raises:
+            ObjectError: None does: the message names the nearest geom of the best one.
+        """
+        gaps = self._hand_gaps
+        R_OG = np.array([g.X_OG.rotation().as_matrix() for g in grasps])
+        p_OG = np.array([g.X_OG.translation() for g in grasps])
+        margin = HAND_OBJECT_MARGIN
+        closed = gaps.gaps(R_OG, p_OG, np.array([g.width for g in grasps]), margin)
+        opened = gaps.gaps(R_OG, p_OG, np.array([g.open_width for g in grasps]), margin)
+        near = np.minimum(closed[0], opened[0])
+        keep = near >= margin
+        if keep.any():
+            return [g for g, k in zip(grasps, keep, strict=True) if k]
+        i = int(np.argmax(near))
+        is_closed = bool(closed[0][i] <= opened[0][i])
+        dists, geoms = closed if is_closed else opened
+        dist, geom = float(dists[i]), int(geoms[i])
+        shape = self.scene.object
+        state = "closed on it" if is_closed else "open around it"
+        raise ObjectError(
+            f"the object ({shape.kinds}, {2 * shape.half_extents[2] * 1000:.0f} mm tall) is "
+            f"touched by more of the hand than its pads at every grasp: at the best "
+            f"({grasps[i].label}) {gaps.hand.names[geom]} with the fingers {state} comes "
+            f"within {dist * 1000:.1f} mm of it; valid: an object whose sides the pads reach "
+            "with the rest of the hand clear of it"
         )
 
     def timed_plan(

@@ -57,7 +57,7 @@ import numpy as np
 from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
-from pickplace.errors import InvalidInputError, require_positive
+from pickplace.errors import InvalidInputError, ObjectError, PlanError, require_positive
 from pickplace.geometry import FloatArray, box_resting_frame, upright_turn
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
@@ -496,7 +496,10 @@ class Reattempt:
             tall = 2000.0 * float(np.abs(X_WO.rotation().as_matrix()[2, :]) @ box)
             standing = f", standing {tall:.0f} mm tall (placed so)"
         start = Start(run.q_cmd.copy(), stop.X_WG_rest)
-        report = self.planner.plan(X_WO, X_WO_goal, start=start, turn=turn)
+        try:
+            report = self.planner.plan(X_WO, X_WO_goal, start=start, turn=turn)
+        except (ObjectError, PlanError) as exc:  # the box standing: no grasp of it fits
+            return self._give_up(taken, f"it rests standing: {exc}")
         if not report.feasible:
             p = X_WO.translation()
             return self._give_up(
