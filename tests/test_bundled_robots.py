@@ -47,13 +47,6 @@ ROBOTS = bundled_robots()
 
 # What the Menagerie robots do not do yet, stated rather than skipped: each case must fail
 # (strict), so the mark goes the day the capability comes.
-PINV_MEETS_A_JOINT_RANGE_FIRST = pytest.mark.xfail(
-    strict=True,
-    reason="on Menagerie's Panda, pinv at the singular reach runs a joint past its range "
-    "before any joint exceeds its speed limit",
-)
-
-
 PASSIVE_2F85_SQUEEZES_WHEN_PUSHED = pytest.mark.xfail(
     strict=True,
     reason="Menagerie's 2F-85 with no actuator force on the UR5e: pushed onto the brick by the "
@@ -172,7 +165,7 @@ def test_full_stretch_is_where_the_tool_pointing_down_stops_reaching(robot: str)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("robot", _marked({"menagerie-panda-hand": PINV_MEETS_A_JOINT_RANGE_FIRST}))
+@pytest.mark.parametrize("robot", ROBOTS)
 def test_singular_reach_qp_stays_within_limits_and_pinv_exceeds_a_speed_limit(robot: str) -> None:
     qp = finished("singular-reach", robot=robot)
     scene, task = qp.sim.scene, qp.sim.task
