@@ -72,6 +72,7 @@ from pickplace.geometry import (
     vertical_axis,
 )
 from pickplace.planning.candidates import (
+    GRASP_HEIGHT_FRACTIONS,
     GRAVITY,
     HAND_OBJECT_MARGIN,
     GraspCandidate,
@@ -903,7 +904,8 @@ class PickPlacePlanner:
     def turned_grasps(self, turn: FloatArray) -> list[GraspCandidate]:
         """The grasp candidates of the box with its frame O turned to ``O' = O · turn``: those
         of the box lying with O''s z up, sizes ``|turn|ᵀ h`` (:func:`~pickplace.planning.
-        candidates.box_grasps`), expressed in O (``X_OG = turn · X_O'G``).
+        candidates.box_grasps`), each also with the pads raised up its side, expressed in O
+        (``X_OG = turn · X_O'G``), less those where more of the hand than the pads touches it.
 
         Raises:
             PlanError: The object is not a box (only a box's frame is turned onto a face), or
@@ -918,10 +920,19 @@ class PickPlacePlanner:
             )
         R = np.asarray(turn, dtype=np.float64)
         X_OO = SE3.from_rotation(SO3.from_matrix(R))
-        turned = [
-            replace(g, X_OG=X_OO @ g.X_OG)
-            for g in box_grasps(np.abs(R).T @ box, self.config.open_width, self.pad_half_length)
-        ]
+        h = np.abs(R).T @ box
+        # Standing, the box is taller than it lies: the pads also grip up its side
+        # (GRASP_HEIGHT_FRACTIONS of the travel that keeps them on it), the palm above its top.
+        travel = max(0.0, float(h[2]) - self.pad_half_height)
+        turned = []
+        for g in box_grasps(h, self.config.open_width, self.pad_half_length):
+            for fraction in GRASP_HEIGHT_FRACTIONS:
+                up = fraction * travel
+                if fraction and up == 0.0:
+                    continue
+                X_OpG = SE3.from_translation(np.array([0.0, 0.0, up])) @ g.X_OG
+                label = g.label + (f", {up * 1000:.0f} mm up" if up else "")
+                turned.append(replace(g, label=label, X_OG=X_OO @ X_OpG))
         if not turned:
             raise PlanError(
                 f"the gripper opens to {self.config.open_width * 1000:.0f} mm, too little for "
