@@ -70,22 +70,13 @@ def test_the_kept_can_grasps_touch_the_can_with_the_pads_only_and_the_dropped_on
 
 @pytest.mark.parametrize("name", ["can", "jar"])
 def test_the_lower_bound_never_exceeds_mujoco_s_distance(name: str) -> None:
-    from pickplace.planning.candidates import HandFootprint, HandObjectGaps
+    from pickplace.planning.candidates import HandObjectGaps
 
     scene, planner = _planner("ur5e-2f85", name)
     robot = scene.robot
     pads = np.concatenate(robot.pad_geom_ids)
     others = robot.gripper_geom_ids[~np.isin(robot.gripper_geom_ids, pads)]
-    hand = HandFootprint(
-        planner.preflight.model,
-        others,
-        [scene.geom_name(int(h)) for h in others],
-        robot.tool_site_id,
-        scene.gripper_qpos_adr,
-        robot.qpos_for_width,
-        (robot.arm_qpos_adr, robot.q_home),
-    )
-    gaps = HandObjectGaps(hand, scene.object)
+    gaps = HandObjectGaps(planner.footprint_of(others), scene.object)
     every = planner.grasps()
     rng = np.random.default_rng(RNG_SEED + 1)
     for i in rng.choice(len(every), size=20, replace=False):

@@ -502,18 +502,7 @@ class PickPlacePlanner:
         )
         # The last joint turns the tool's yaw by its own angle times its axis' z component.
         self.wrist_axis_z = float(kin.data.xaxis[robot.n_joints - 1][2])
-
-        def footprint(ids: np.ndarray) -> HandFootprint:
-            return HandFootprint(
-                self.preflight.model,
-                ids,
-                [scene.geom_name(int(g)) for g in ids],
-                robot.tool_site_id,
-                scene.gripper_qpos_adr,
-                robot.qpos_for_width,
-                (robot.arm_qpos_adr, robot.q_home),
-            )
-
+        footprint = self.footprint_of
         self.hand = footprint(robot.gripper_geom_ids)
         pad_hand = footprint(pads)
         pad_corners = pad_hand.corners_G(self.config.open_width)
@@ -550,6 +539,20 @@ class PickPlacePlanner:
         # The C-space metric: each joint's lever arm over the links after it, the hand and
         # the brick (the farthest of their points from the tool).
         self.lever_arms = lever_arms(kin, robot.q_home, self._hand_reach())
+
+    def footprint_of(self, geom_ids: np.ndarray) -> HandFootprint:
+        """The collision boxes of the hand's geoms ``geom_ids`` on the pre-flight's model, at
+        home (:class:`~pickplace.planning.candidates.HandFootprint`)."""
+        scene, robot = self.scene, self.scene.robot
+        return HandFootprint(
+            self.preflight.model,
+            geom_ids,
+            [scene.geom_name(int(g)) for g in geom_ids],
+            robot.tool_site_id,
+            scene.gripper_qpos_adr,
+            robot.qpos_for_width,
+            (robot.arm_qpos_adr, robot.q_home),
+        )
 
     def _hand_reach(self) -> float:
         """The farthest point of the hand (open) or the held brick from the tool [m]."""
