@@ -422,11 +422,11 @@ def _refuse_gripper_into_arm(
 ) -> None:
     """Refuse a gripper that points back into the arm (``desc_quat``: its ``mount_quat``).
 
-    At the arm's zero posture, from the nearest arm joint behind the flange (the last whose
-    anchor is not the flange itself) to the flange is the way out of the arm; a tool axis
-    (the calibrated approach direction, z) with a negative component along it points the
-    gripper into the arm's own links, which the robot never collides with: every posture then
-    carries the wrist beside the fingers. Menagerie's Gen3 has no attachment site, and its last
+    At the arm's zero posture, from an arm joint behind the flange (one whose anchor is not
+    the flange itself) to the flange is the way out of the arm; a tool axis (the calibrated
+    approach direction, z) with a negative component along it from both of the two nearest
+    such joints points the gripper into the arm's own links, which the robot never collides
+    with: every posture then carries the wrist beside the fingers. Menagerie's Gen3 has no attachment site, and its last
     body's z axis points into the arm (Kinova's tool frame is that body's -z, 61.5 mm out).
 
     Raises:
@@ -438,15 +438,19 @@ def _refuse_gripper_into_arm(
     R_WF = data.xmat[flange_body].reshape(3, 3)
     p_WF = data.xpos[flange_body] + R_WF @ arm.flange_pos
     z_tool_W = data.site_xmat[tool_site].reshape(3, 3)[:, 2]
-    for j in joint_ids[::-1]:
-        out_W = p_WF - data.xanchor[j]
-        if np.linalg.norm(out_W) > 1e-6:  # an anchor at the flange says nothing
-            break
-    else:
+    # The two nearest joint anchors behind the flange (an anchor at the flange says nothing):
+    # the nearest alone may sit beside or even past the flange (robosuite's xArm7 has its
+    # last anchor 27 mm behind the face its gripper hangs 153 mm down from), so both must
+    # have the tool pointing back towards them.
+    behind = [
+        (int(j), p_WF - data.xanchor[j])
+        for j in joint_ids[::-1]
+        if np.linalg.norm(p_WF - data.xanchor[j]) > 1e-6
+    ][:2]
+    if not behind or any(float(out @ z_tool_W) >= 0.0 for _, out in behind):
         return
+    j, out_W = behind[0]
     out_W = out_W / np.linalg.norm(out_W)
-    if float(out_W @ z_tool_W) >= 0.0:
-        return
     # Flange frame: the flange body's frame turned by the flange's own orientation.
     R_BF = np.zeros(9)
     mujoco.mju_quat2Mat(R_BF, arm.flange_quat)
