@@ -426,8 +426,9 @@ def _refuse_gripper_into_arm(
     the flange itself) to the flange is the way out of the arm; a tool axis (the calibrated
     approach direction, z) with a negative component along it from both of the two nearest
     such joints points the gripper into the arm's own links, which the robot never collides
-    with: every posture then carries the wrist beside the fingers. Menagerie's Gen3 has no attachment site, and its last
-    body's z axis points into the arm (Kinova's tool frame is that body's -z, 61.5 mm out).
+    with: every posture then carries the wrist beside the fingers. Menagerie's Gen3 has no
+    attachment site, and its last body's z axis points into the arm (Kinova's tool frame is
+    that body's -z, 61.5 mm out).
 
     Raises:
         RobotError: The tool axis points into the arm; the message names the joint, the
