@@ -127,6 +127,14 @@ ROBOSUITE_COMBINATIONS = (
         _RADIAN,
     ),
     Combination(
+        "rs-sawyer-rethink",
+        f"{_RS}/robots/sawyer/robot.xml",
+        f"{_RS}/grippers/rethink_gripper.xml",
+        _SAWYER,
+        _RADIAN,
+        _RADIAN,
+    ),
+    Combination(
         "rs-xarm7-gripper",
         f"{_RS}/robots/xarm7/robot.xml",
         f"{_RS}/grippers/xarm7_gripper.xml",
