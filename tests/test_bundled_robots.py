@@ -54,6 +54,13 @@ PASSIVE_2F85_SQUEEZES_WHEN_PUSHED = pytest.mark.xfail(
     "so the grasp passes its check and the brick drops 90 ms into the lift (dropped)",
 )
 
+LINKAGE_CARRIES_THE_KNOCKED_BRICK = pytest.mark.xfail(
+    strict=True,
+    reason="Menagerie's 2F-85 on the UR5e (timed by UR's acceleration limits) carries the brick "
+    "through the knock's 20 blows of 4.2 m/s: it slides 7 mm in the grip and is placed "
+    "(success, not dropped)",
+)
+
 
 def _marked(marks: dict[str, pytest.MarkDecorator]) -> list[object]:
     """ROBOTS as parameters, with ``marks[robot]`` on the robots it names."""
@@ -216,6 +223,8 @@ def test_the_preflight_chooses_among_home_candidates(scene: Scene) -> None:
     [
         pytest.param(r, s, marks=PASSIVE_2F85_SQUEEZES_WHEN_PUSHED)
         if (r, s) == ("menagerie-ur5e-2f85", "fault-gripper-disabled")
+        else pytest.param(r, s, marks=LINKAGE_CARRIES_THE_KNOCKED_BRICK)
+        if (r, s) == ("menagerie-ur5e-2f85", "fault-knock")
         else (r, s)
         for s in SCENARIOS
         if s.startswith("fault-")
