@@ -5,23 +5,28 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 from mink.lie import SE3
 
+import pickplace.planning.planner as planner_module
 from pickplace.errors import InvalidInputError, PlanError
 from pickplace.planning.plan import PlanConfig
+from pickplace.planning.planner import PickPlacePlanner
 from pickplace.planning.timing import (
     GRAVITY_W,
     SegmentLimits,
     TimingConfig,
+    TimingStallError,
     cycle_time_at_speed_limits,
     cycle_time_bound,
     path_derivatives,
     scaled_law,
     slip_box,
     time_optimal_law,
+    time_optimal_profile,
 )
 from pickplace.planning.trajectory import Keyframe
 from pickplace.run.runner import RunRequest, prepare
@@ -217,3 +222,41 @@ def test_at_the_speed_limits_the_tightest_joint_counts_step_by_step() -> None:
     v_max = np.ones(2)
     assert cycle_time_bound(keyframes, dt, q, v_max) == pytest.approx(1.2 + 0.5)
     assert cycle_time_at_speed_limits(keyframes, dt, q, v_max) == pytest.approx(2.0 + 0.5)
+
+
+def test_a_path_a_limit_leaves_no_speed_on_stalls_and_the_planner_refuses_that_candidate() -> None:
+    """A joint moving along the path with (all but) no speed allowed leaves the middle of the
+    path no speed: a TimingStallError. The planner makes it the candidate's problem (its
+    motion named), never an error of the run, and goes on to the next candidate."""
+    s = np.linspace(0.0, 0.2, 21)
+    q = np.stack([np.sin(10.0 * s), s], axis=1)  # joint 0 moves, then turns back
+    p_W = np.stack([s, np.zeros_like(s), np.zeros_like(s)], axis=1)
+    limits = SegmentLimits(v_max=np.array([1e-300, 1.0]), a_max=np.array([10.0, 10.0]))
+    with pytest.raises(TimingStallError, match="admits no speed"):
+        time_optimal_profile(q, s, p_W, np.zeros_like(p_W), limits)
+    ok = SegmentLimits(v_max=np.array([1.0, 1.0]), a_max=np.array([10.0, 10.0]))
+    assert time_optimal_profile(q, s, p_W, np.zeros_like(p_W), ok).t[-1] > 0.0
+
+
+def test_a_candidate_whose_path_stalls_is_refused_and_the_next_one_planned(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The planner makes a stalled timing the candidate's problem (``speed-limit``, at the
+    stalled motion's start, naming it), never an error of the run, and goes on."""
+    scene, task, _ = prepare(RunRequest(scenario="pick-place"))
+    planner = PickPlacePlanner(scene, "qp")
+    calls: list[int] = []
+
+    def stalls_once(*args: Any, **kwargs: Any) -> Any:
+        calls.append(1)
+        if len(calls) == 1:
+            raise TimingStallError("the timing stalls (test)", 0.25, ("pre-pick", "pick"))
+        return real_retime(*args, **kwargs)
+
+    real_retime = planner_module.retime
+    monkeypatch.setattr(planner_module, "retime", stalls_once)
+    report = planner.plan(task.X_WO_start, task.goal.X_WO_goal)  # type: ignore[attr-defined]
+    first = report.candidates[0].preflight.problem
+    assert first is not None and first.kind == "speed-limit" and first.t == 0.25
+    assert "stalls" in first.text
+    assert report.feasible and report.chosen == 1

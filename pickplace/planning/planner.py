@@ -107,7 +107,13 @@ from pickplace.planning.preflight import (
     Problem,
     start_configuration,
 )
-from pickplace.planning.timing import GripTooWeakError, SegmentLimits, TimingConfig, retime
+from pickplace.planning.timing import (
+    GripTooWeakError,
+    SegmentLimits,
+    TimingConfig,
+    TimingStallError,
+    retime,
+)
 from pickplace.planning.trajectory import JointSegment, PoseTrajectory
 from pickplace.robot.calibration import MIN_PAD_CLEARANCE, PAD_CLEARANCE
 from pickplace.signals import stop_point
@@ -1014,7 +1020,13 @@ class PickPlacePlanner:
             )
         if not swept.feasible:
             return path, swept, None
-        timed, warning = self.retimed(path, swept.times, swept.q)
+        try:
+            timed, warning = self.retimed(path, swept.times, swept.q)
+        except TimingStallError as exc:  # this path has no timing: the candidate's problem
+            t = exc.t if math.isfinite(exc.t) else 0.0
+            p = path.trajectory.sample(t)[0][4:]
+            problem = Problem(t, "speed-limit", str(exc), (float(p[0]), float(p[1]), float(p[2])))
+            return path, replace(swept, problem=problem), None
         result = self.preflight.run(timed, X_WO_pick, X_WO_place, q_start=q_start)
         return timed, result, warning
 

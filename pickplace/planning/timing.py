@@ -52,6 +52,21 @@ class GripTooWeakError(PlanError):
     no timing of any path can carry it (it does not depend on the brick's pose or the grasp)."""
 
 
+class TimingStallError(PlanError):
+    """A stretch of a motion's path admits no speed within the limits: no timing of this
+    path exists (another path, e.g. another grasp's, may have one).
+
+    Args:
+        text: What stalled.
+        t: The stalled motion's start on the untimed plan's clock [s] (nan: unknown).
+        motion: The motion's first and last keyframe names ("" unknown).
+    """
+
+    def __init__(self, text: str, t: float = math.nan, motion: tuple[str, str] = ("", "")):
+        super().__init__(text)
+        self.t, self.motion = t, motion
+
+
 @dataclass(frozen=True)
 class SegmentLimits:
     """Limits of one motion segment, in the units of the path.
@@ -299,7 +314,7 @@ def time_optimal_profile(
     sd = np.sqrt(np.maximum(xs, 0.0))
     pair = sd[:-1] + sd[1:]
     if np.any(pair <= _TINY):
-        raise PlanError("the timing stalls: a stretch of the path admits no speed")
+        raise TimingStallError("the timing stalls: a stretch of the path admits no speed")
     t = np.concatenate([[0.0], np.cumsum(2 * h / pair)])
     return Profile(grid, t, sd, (xs[1:] - xs[:-1]) / (2 * h))
 
@@ -526,9 +541,17 @@ def retime(
         carried = (
             carry is not None and carry[0] <= keyframes[i].t and keyframes[j + 1].t <= carry[1]
         )
-        profile = time_optimal_profile(
-            q_motion, grid, poses[:, 4:], _accumulated_rotation(poses[:, :4]), limits(carried)
-        )
+        try:
+            profile = time_optimal_profile(
+                q_motion, grid, poses[:, 4:], _accumulated_rotation(poses[:, :4]), limits(carried)
+            )
+        except TimingStallError as exc:
+            names = (keyframes[i].name, keyframes[j + 1].name)
+            raise TimingStallError(
+                f"{exc} within the robot's limits, from '{names[0]}' to '{names[1]}'",
+                keyframes[i].t,
+                names,
+            ) from exc
         for m in range(i, j + 1):
             law = profile.law(bounds[m - i], bounds[m - i + 1])
             laws[m], durations[m] = law, law.duration
