@@ -274,11 +274,17 @@ def upright_turn(R_WO: SO3) -> FloatArray:
     the z of ``O' = O · R``, the first such (the identity for a box lying with its z up).
 
     A box standing on a face its frame's z is not normal to (a brick on its end) is, in O',
-    the same box lying with its z up: sizes ``|R|ᵀ h`` along O''s axes for sizes h along O's.
+    the same box lying with its z up (its sizes there: :func:`turned_half_extents`).
     """
     M = R_WO.as_matrix()
     ups = [float((M @ R)[2, 2]) for R in AXIS_ROTATIONS]
     return AXIS_ROTATIONS[int(np.argmax(ups))]
+
+
+def turned_half_extents(half_extents: npt.ArrayLike, turn: npt.ArrayLike) -> FloatArray:
+    """A box's half sizes along the axes of its frame turned to ``O' = O · turn`` [m]: ``|turn|ᵀ
+    h`` for half sizes h along O's axes (``turn`` one of :data:`AXIS_ROTATIONS`)."""
+    return np.abs(np.asarray(turn, dtype=np.float64)).T @ np.asarray(half_extents, dtype=float)
 
 
 def vertical_axis(R_WO: SO3) -> int:

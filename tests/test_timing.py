@@ -250,7 +250,7 @@ def test_a_candidate_whose_path_stalls_is_refused_and_the_next_one_planned(
     def stalls_once(*args: Any, **kwargs: Any) -> Any:
         calls.append(1)
         if len(calls) == 1:
-            raise TimingStallError("the timing stalls (test)", 0.25, ("pre-pick", "pick"))
+            raise TimingStallError("the timing stalls (test)", 0.25)
         return real_retime(*args, **kwargs)
 
     real_retime = planner_module.retime

@@ -94,13 +94,16 @@ def box_grasps(
     pad_half_length: float,
     tilts: tuple[float, ...] = GRASP_TILTS,
     offset_fractions: tuple[float, ...] = GRASP_OFFSET_FRACTIONS,
+    height_fractions: tuple[float, ...] = (0.0,),
+    pad_half_height: float = 0.0,
 ) -> Iterator[GraspCandidate]:
     """Antipodal grasps of a box lying flat, pads on a pair of its side faces (module docstring).
 
     Across the width (O's y, ``R_OG = Ry(π)``: G's x = -O's x, G's y = O's y, G's z = -O's z)
     first, then across the length (O's x, ``R_OG = Rz(π/2) Ry(π)``); each with every tilt
     ``θ`` (``R_OG · Ry(±θ)``, G's y the closing axis), every offset ``s`` along the face
-    (``p_OG = s · x_G``, G's x horizontal in O), and both wrist turns.
+    (``p_OG = s · x_G``, G's x horizontal in O), both wrist turns, and each raised up the side
+    by ``height_fractions`` of the travel that keeps the pad on it (``p_OG + u · z_O``).
 
     Args:
         half_extents: The box's half sizes along O's x, y, z [m].
@@ -108,12 +111,17 @@ def box_grasps(
         pad_half_length: Half size of a pad along G's x [m] (along the face).
         tilts: Tilts from vertical [rad], each tried either way (0 once).
         offset_fractions: Offsets as fractions of the largest that keeps the pad on the face.
+        height_fractions: Raises up the side, as fractions of the largest that keeps the pad
+            on the face (the brick lying: centred only; a box standing taller,
+            :data:`GRASP_HEIGHT_FRACTIONS`).
+        pad_half_height: Half size of a pad along G's z [m] (up the face).
 
     Yields:
         The candidates, for each face pair whose width the gripper opens to with
         :func:`~pickplace.robot.calibration.pad_clearance` a side.
     """
     h = np.asarray(half_extents, dtype=np.float64)
+    rise = max(0.0, float(h[2]) - pad_half_height)
     bases = (
         ("across the width", 1, SO3.from_y_radians(math.pi)),
         ("across the length", 0, SO3.from_z_radians(0.5 * math.pi) @ SO3.from_y_radians(math.pi)),
@@ -136,15 +144,20 @@ def box_grasps(
                 X_OG = SE3.from_rotation_and_translation(R_OG, offset * x_O)
                 for turned in (False, True):
                     X = X_OG @ SE3.from_rotation(SO3.from_z_radians(math.pi)) if turned else X_OG
-                    yield GraspCandidate(
-                        _label(name, tilt, offset, turned),
-                        X,
-                        width,
-                        open_width,
-                        tilt,
-                        offset,
-                        turned,
-                    )
+                    label = _label(name, tilt, offset, turned)
+                    for height in height_fractions:
+                        up = height * rise
+                        if height and up == 0.0:
+                            continue
+                        yield GraspCandidate(
+                            label + (f", {up * 1000:.0f} mm up" if up else ""),
+                            SE3.from_translation(np.array([0.0, 0.0, up])) @ X if up else X,
+                            width,
+                            open_width,
+                            tilt,
+                            offset,
+                            turned,
+                        )
 
 
 GRASP_YAWS = 12

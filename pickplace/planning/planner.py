@@ -69,6 +69,7 @@ from pickplace.geometry import (
     FloatArray,
     pose_error_W_floats,
     require_pose,
+    turned_half_extents,
     vertical_axis,
 )
 from pickplace.planning.candidates import (
@@ -440,6 +441,13 @@ class GraspSet:
         arms = np.linalg.norm(r_O - along, axis=1)
         return cls(grasps, R_OG, p_OG, np.array([g.open_width for g in grasps]), arms)
 
+    def select(self, keep: np.ndarray) -> GraspSet:
+        """The candidates where ``keep`` (n,) is true, in their order."""
+        grasps = [g for g, k in zip(self.grasps, keep, strict=True) if k]
+        return GraspSet(
+            grasps, self.R_OG[keep], self.p_OG[keep], self.open_widths[keep], self.arms[keep]
+        )
+
 
 class PickPlacePlanner:
     """Makes, ranks and pre-flights pick-and-place candidates (see the module docstring).
@@ -517,11 +525,13 @@ class PickPlacePlanner:
         self.pad_half_height = 0.5 * float(np.max(pad_z.max(axis=1) - pad_z.min(axis=1)))
         self.pad_friction = mu
         self.p_O_com = scene.model.body_ipos[scene.brick_body_id].copy()
-        self._grasps = self.grasps()
-        if self._grasps:
+        grasps = self.grasps()
+        if grasps:
             others = robot.gripper_geom_ids[~np.isin(robot.gripper_geom_ids, pads)]
             self._hand_gaps = HandObjectGaps(footprint(others), scene.object)
-            self._grasps = self._clear_of_hand(self._grasps)
+            height = 2.0 * float(scene.object.half_extents[2])
+            self._set = self._clear_of_hand(GraspSet.of(grasps, self.p_O_com), height)
+            self._grasps = self._set.grasps
         else:
             shape = scene.object
             narrowest = 2.0 * shape.min_footprint_half
@@ -532,7 +542,6 @@ class PickPlacePlanner:
                 f"{(self.config.open_width - 2 * MIN_PAD_CLEARANCE) * 1000:.0f} mm across "
                 "(the opening less the pad clearance a side)"
             )
-        self._set = GraspSet.of(self._grasps, self.p_O_com)
         self._turned: dict[bytes, GraspSet] = {}
         self._bin_frames = {
             b.name: (b.X_WB.inverse().rotation().as_matrix(), b.X_WB.inverse().translation())
@@ -907,10 +916,10 @@ class PickPlacePlanner:
             return self._set
         key = np.asarray(turn, dtype=np.float64).tobytes()
         if key not in self._turned:
-            self._turned[key] = GraspSet.of(self.turned_grasps(turn), self.p_O_com)
+            self._turned[key] = self.turned_grasps(turn)
         return self._turned[key]
 
-    def turned_grasps(self, turn: FloatArray) -> list[GraspCandidate]:
+    def turned_grasps(self, turn: FloatArray) -> GraspSet:
         """The grasp candidates of the box with its frame O turned to ``O' = O · turn``: those
         of the box lying with O''s z up, sizes ``|turn|ᵀ h`` (:func:`~pickplace.planning.
         candidates.box_grasps`), each also with the pads raised up its side, expressed in O
@@ -929,25 +938,25 @@ class PickPlacePlanner:
             )
         R = np.asarray(turn, dtype=np.float64)
         X_OO = SE3.from_rotation(SO3.from_matrix(R))
-        h = np.abs(R).T @ box
-        # Standing, the box is taller than it lies: the pads also grip up its side
-        # (GRASP_HEIGHT_FRACTIONS of the travel that keeps them on it), the palm above its top.
-        travel = max(0.0, float(h[2]) - self.pad_half_height)
-        turned = []
-        for g in box_grasps(h, self.config.open_width, self.pad_half_length):
-            for fraction in GRASP_HEIGHT_FRACTIONS:
-                up = fraction * travel
-                if fraction and up == 0.0:
-                    continue
-                X_OpG = SE3.from_translation(np.array([0.0, 0.0, up])) @ g.X_OG
-                label = g.label + (f", {up * 1000:.0f} mm up" if up else "")
-                turned.append(replace(g, label=label, X_OG=X_OO @ X_OpG))
+        h = turned_half_extents(box, R)
+        # Standing, the box is taller than it lies: the pads also grip up its side, the palm
+        # above its top.
+        turned = [
+            replace(g, X_OG=X_OO @ g.X_OG)
+            for g in box_grasps(
+                h,
+                self.config.open_width,
+                self.pad_half_length,
+                height_fractions=GRASP_HEIGHT_FRACTIONS,
+                pad_half_height=self.pad_half_height,
+            )
+        ]
         if not turned:
             raise PlanError(
                 f"the gripper opens to {self.config.open_width * 1000:.0f} mm, too little for "
                 "any pair of the box's faces beside the one it rests on; valid: the box lying"
             )
-        return self._clear_of_hand(turned)
+        return self._clear_of_hand(GraspSet.of(turned, self.p_O_com), 2.0 * float(h[2]))
 
     def grasps(self) -> list[GraspCandidate]:
         """The object's grasp candidates, in generation order (module docstring)."""
@@ -960,24 +969,24 @@ class PickPlacePlanner:
             )
         )
 
-    def _clear_of_hand(self, grasps: list[GraspCandidate]) -> list[GraspCandidate]:
-        """The ``grasps`` whose hand, but for the pads, keeps :data:`~pickplace.planning.
+    def _clear_of_hand(self, candidates: GraspSet, height: float) -> GraspSet:
+        """The ``candidates`` whose hand, but for the pads, keeps :data:`~pickplace.planning.
         candidates.HAND_OBJECT_MARGIN` from the object, open around it and closed on it
-        (:class:`~pickplace.planning.candidates.HandObjectGaps`), in their order.
+        (:class:`~pickplace.planning.candidates.HandObjectGaps`), in their order; ``height``
+        [m]: how tall the object stands, for the refusal.
 
         Raises:
             ObjectError: None does: the message names the nearest geom of the best one.
         """
-        gaps = self._hand_gaps
-        R_OG = np.array([g.X_OG.rotation().as_matrix() for g in grasps])
-        p_OG = np.array([g.X_OG.translation() for g in grasps])
+        gaps, grasps = self._hand_gaps, candidates.grasps
+        R_OG, p_OG = candidates.R_OG, candidates.p_OG
         margin = HAND_OBJECT_MARGIN
         closed = gaps.gaps(R_OG, p_OG, np.array([g.width for g in grasps]), margin)
-        opened = gaps.gaps(R_OG, p_OG, np.array([g.open_width for g in grasps]), margin)
+        opened = gaps.gaps(R_OG, p_OG, candidates.open_widths, margin)
         near = np.minimum(closed[0], opened[0])
         keep = near >= margin
         if keep.any():
-            return [g for g, k in zip(grasps, keep, strict=True) if k]
+            return candidates.select(keep)
         i = int(np.argmax(near))
         is_closed = bool(closed[0][i] <= opened[0][i])
         dists, geoms = closed if is_closed else opened
@@ -985,7 +994,7 @@ class PickPlacePlanner:
         shape = self.scene.object
         state = "closed on it" if is_closed else "open around it"
         raise ObjectError(
-            f"the object ({shape.kinds}, {2 * shape.half_extents[2] * 1000:.0f} mm tall) is "
+            f"the object ({shape.kinds}, {height * 1000:.0f} mm tall) is "
             f"touched by more of the hand than its pads at every grasp: at the best "
             f"({grasps[i].label}) {gaps.hand.names[geom]} with the fingers {state} comes "
             f"within {dist * 1000:.1f} mm of it; valid: an object whose sides the pads reach "

@@ -57,14 +57,13 @@ class TimingStallError(PlanError):
     path exists (another path, e.g. another grasp's, may have one).
 
     Args:
-        text: What stalled.
+        text: What stalled (and, from :func:`retime`, the motion's keyframes).
         t: The stalled motion's start on the untimed plan's clock [s] (nan: unknown).
-        motion: The motion's first and last keyframe names ("" unknown).
     """
 
-    def __init__(self, text: str, t: float = math.nan, motion: tuple[str, str] = ("", "")):
+    def __init__(self, text: str, t: float = math.nan):
         super().__init__(text)
-        self.t, self.motion = t, motion
+        self.t = t
 
 
 @dataclass(frozen=True)
@@ -546,11 +545,10 @@ def retime(
                 q_motion, grid, poses[:, 4:], _accumulated_rotation(poses[:, :4]), limits(carried)
             )
         except TimingStallError as exc:
-            names = (keyframes[i].name, keyframes[j + 1].name)
             raise TimingStallError(
-                f"{exc} within the robot's limits, from '{names[0]}' to '{names[1]}'",
+                f"{exc} within the robot's limits, from '{keyframes[i].name}' to "
+                f"'{keyframes[j + 1].name}'",
                 keyframes[i].t,
-                names,
             ) from exc
         for m in range(i, j + 1):
             law = profile.law(bounds[m - i], bounds[m - i + 1])

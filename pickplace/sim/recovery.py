@@ -58,7 +58,7 @@ from mink.lie import SE3, SO3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.errors import InvalidInputError, ObjectError, PlanError, require_positive
-from pickplace.geometry import FloatArray, box_resting_frame, upright_turn
+from pickplace.geometry import FloatArray, box_resting_frame, turned_half_extents, upright_turn
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
@@ -84,9 +84,8 @@ def standing_goal(X_WO_goal: SE3, half_extents: FloatArray, turn: FloatArray) ->
         half_extents: Its half sizes h along O's axes [m].
         turn: The turn of O that the box rests with the z of ``O · turn`` up (3, 3).
     """
-    h = np.asarray(half_extents, dtype=np.float64)
     R = np.asarray(turn, dtype=np.float64)
-    rise = float((np.abs(R).T @ h)[2] - h[2])
+    rise = float(turned_half_extents(half_extents, R)[2] - half_extents[2])
     X_WOp = SE3.from_rotation_and_translation(
         X_WO_goal.rotation(), X_WO_goal.translation() + np.array([0.0, 0.0, rise])
     )
