@@ -219,12 +219,13 @@ BAD_OBJECTS = {
         '<geom type="cylinder" size="0.06 0.05" mass="0.3"/></body></worldbody></mujoco>',
         "the object (cylinder) is at least 120 mm across every horizontal direction",
     ),
-    # A 40 mm tall block, a post 40 mm across rising 150 mm from its top: the pads close on the
-    # block, and at every grasp the post runs into the hand above them.
-    "pole.xml": (
+    # A 40 mm tall block, a fin 8 mm thick and 200 mm long rising 100 mm from its top: the pads
+    # close on the block across the fin, and at every tilt the hand between the fingers runs
+    # into the fin (a post would let a tilted hand lean past it).
+    "fin.xml": (
         '<mujoco><worldbody><body name="o"><freejoint/>'
         '<geom type="box" size="0.025 0.025 0.02" mass="0.2"/>'
-        '<geom type="cylinder" size="0.02 0.075" pos="0 0 0.095" mass="0.05"/>'
+        '<geom type="box" size="0.1 0.004 0.05" pos="0 0 0.07" mass="0.05"/>'
         "</body></worldbody></mujoco>",
         "is touched by more of the hand than its pads at every grasp",
     ),

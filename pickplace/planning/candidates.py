@@ -42,14 +42,18 @@ from pickplace.robot.calibration import pad_clearance
 from pickplace.world.objects import ObjectGeometry
 from pickplace.world.scene import BinGeometry
 
-GRASP_TILTS = (0.0, math.radians(15.0), math.radians(30.0))
+GRASP_TILTS = tuple(math.radians(a) for a in (0.0, 15.0, 30.0, 45.0, 60.0))
 """Tilts of the approach from vertical about the closing axis [rad], each tried either way;
-vertical first. 30° leans the palm of every bundled gripper (its underside 45–95 mm above the
-tool site) 20 mm or more away from a wall the object touches."""
+vertical first (the ranking prefers the smaller tilt). A tilt leans the palm away from a wall
+the object lies along; 45° and 60° are what a hand whose palm is wide along the closing axis
+has left in a corner, where the closing axis along one wall points the palm's end into the
+other."""
 
-GRASP_OFFSET_FRACTIONS = (0.0, 0.5, -0.5)
+GRASP_OFFSET_FRACTIONS = (0.0, 0.5, -0.5, 1.0, -1.0)
 """Offsets of the pads' centre along the face, as fractions of the largest offset that keeps
-the pad on the face [-]; centred first."""
+the pad on the face [-]; centred first, the pad at the face's end last (the palm farthest
+from a wall across that end; the weight's torque about the pads is the largest there, and the
+ranking tries it after the nearer ones)."""
 
 GRAVITY = 9.81
 """Standard gravity [m/s²]."""
