@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from mink.lie import SE3
 
+from pickplace.planning.plan import grasp_width
 from pickplace.planning.planner import Candidate, PickPlacePlanner
 from pickplace.planning.preflight import Preflight, PreflightConfig, collision_model
 from pickplace.run.runner import RunRequest, prepare
@@ -183,3 +184,31 @@ def test_a_wrist_wound_into_its_limit_is_refused(scene: Scene) -> None:
 def test_config_is_validated() -> None:
     with pytest.raises(ValueError, match="pre-flight clearance must be a finite number > 0"):
         PreflightConfig(clearance=0.0)
+
+
+def test_the_fingers_close_onto_the_brick_no_further(
+    scene: Scene, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """From the pick until they let go, the fingers stand at the grasped brick's width where the
+    plan commands less (the brick stops them, as the physics has it: a linkage's fingertips,
+    which move along the approach as they close, were checked below the brick's width
+    against the floor under it); before the pick, at the commanded width."""
+    _, task, _ = prepare(RunRequest())
+    pf = Preflight(scene, "qp")
+    widths: list[float] = []
+    closest = pf._closest
+
+    def spy(q: np.ndarray, width: float, *rest: object) -> tuple[float, object]:
+        widths.append(width)
+        return closest(q, width, *rest)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pf, "_closest", spy)
+    pf.run(task.plan, task.X_WO_start, task.goal.X_WO_goal, stop_at_problem=False)
+    phases, held = task.plan.phases, grasp_width(task.plan, scene)
+    assert phases is not None
+    times = np.arange(len(widths)) * pf.dt
+    commanded = np.array([task.plan.trajectory.sample(float(t))[2] for t in times])
+    on_brick = (times >= phases.approach[1]) & (times < phases.release)
+    assert np.any(on_brick & (commanded < held - 1e-3))  # the plan closes past the brick
+    np.testing.assert_array_equal(np.array(widths)[~on_brick], commanded[~on_brick])
+    np.testing.assert_array_equal(np.array(widths)[on_brick], np.maximum(commanded[on_brick], held))

@@ -236,3 +236,41 @@ def test_robosuite_panda_gripper_is_measured_on_its_pad_boxes_clear_of_its_palm(
     np.testing.assert_allclose(cal.pos_BG, [0.0, 0.0, 0.0934], atol=5e-4)
     assert "hand_collision" not in cal.other_contacts
     _picks_and_places(path)
+
+
+XARM7 = MENAGERIE / "ufactory_xarm7"  # only its hand: hand.xml and the 7 meshes it names
+
+
+@pytest.mark.slow
+def test_menagerie_xarm_hand_is_measured_at_its_finger_meshes_inner_faces(tmp_path: Path) -> None:
+    # Each finger is one mesh whose own frame (its principal axes) is turned 19 degrees about
+    # the hand's x: its bounding box's corner lay 11.6 mm inside the inner face, and the pads
+    # were measured 25.7 mm apart squeezing the 50 mm brick. The gap is the mesh vertices':
+    # the brick's width squeezing it, and at the open command what the innermost vertices of
+    # the two fingers are apart along the closing axis.
+    assert (XARM7 / "LICENSE").is_file()
+    path = _description(
+        tmp_path, f'name = "iiwa14-xarm-hand"\n{IIWA14}[gripper]\nmjcf = "{XARM7 / "hand.xml"}"\n'
+    )
+    comp = load_robot(path)
+    robot, m = comp.robot, comp.model
+    cal = robot.calibration
+    assert cal.pads == (("left_finger/geom[0]",), ("right_finger/geom[0]",))
+    width = 2.0 * cal.brick_half_extents[1]
+    assert width - 5e-4 < cal.gap_on_brick <= width  # the stiff pads sink in by < 0.5 mm
+    d = mujoco.MjData(m)
+    d.qpos[m.jnt_qposadr[robot.gripper_joint_ids]] = robot.qpos_for_width(cal.open_width)
+    mujoco.mj_kinematics(m, d)
+    y_W = d.site_xmat[robot.tool_site_id].reshape(3, 3)[:, 1]
+    inner = []
+    for side, pads in zip((-1.0, 1.0), cal.pads, strict=True):
+        g = m.geom("gripper/" + pads[0]).id
+        mesh = m.geom_dataid[g]
+        v = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+        along = (d.geom_xpos[g] + v @ d.geom_xmat[g].reshape(3, 3).T) @ y_W
+        inner.append(side * float(np.max(side * along)))
+    # The faces are found squeezing the brick, where the loaded linkage (soft loop constraints
+    # under 390 N a side) tilts each finger a little: open, their plane lies 0.13 mm a side
+    # inside the innermost vertex (measured), against 11.6 mm for the bounding box's corner.
+    assert inner[0] - inner[1] == pytest.approx(cal.open_width, abs=5e-4)
+    _picks_and_places(path)

@@ -475,6 +475,65 @@ def test_fingers_reaching_past_a_brick_on_the_floor_move_the_tool_point(tmp_path
     assert default.pos_BG[2] == pytest.approx(0.095, abs=1e-4)  # nothing to move: midway
 
 
+def _sheared_pad_obj(side: int) -> str:
+    """A pad as a sheared prism (OBJ) on the ``side`` (+1 / -1) finger, in its body's frame:
+    its inner face flat at y = 2 mm, z 35-55 mm, its outer face at y = 12 mm, 10 mm higher,
+    x +-12 mm. Its principal axes, the mesh's own frame, are turned about x."""
+    corners = [
+        (x, side * y, z)
+        for x in (-0.012, 0.012)
+        for y, z0 in ((0.002, 0.035), (0.012, 0.045))
+        for z in (z0, z0 + 0.02)
+    ]
+    points = np.array(corners)
+    centre = points.mean(axis=0)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    faces = []
+    for q in quads:
+        for tri in ((q[0], q[1], q[2]), (q[0], q[2], q[3])):
+            a, b, c = points[list(tri)]
+            outward = np.cross(b - a, c - a) @ (a - centre) > 0
+            faces.append(tri if outward else (tri[0], tri[2], tri[1]))
+    return "\n".join(
+        [f"v {x:g} {y:g} {z:g}" for x, y, z in corners]
+        + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    )
+
+
+def test_mesh_pads_turned_in_their_own_frame_are_measured_at_their_inner_face(
+    tmp_path: Path,
+) -> None:
+    # Each finger's two box pads become one mesh pad whose inner face is flat at y = +-2 mm
+    # (the finger's travel is 45 mm), but whose own frame (principal axes) is turned: the
+    # corner of its bounding box along the closing axis lies inside that face (Menagerie's
+    # xArm hand: its pads were measured 25.7 mm apart squeezing the 50 mm brick). The gap is
+    # between the faces: 4 mm closed, 94 mm open, the brick's width squeezing it.
+    gripper = TOY_GRIPPER.replace(
+        '<mesh name="palm" file="palm.obj"/>\n  </asset>',
+        '<mesh name="palm" file="palm.obj"/>\n    <mesh name="a_pad" file="a_pad.obj"/>\n'
+        '    <mesh name="b_pad" file="b_pad.obj"/>\n  </asset>',
+    )
+    for side in ("a", "b"):
+        pads = [ln for ln in gripper.splitlines() if f'geom class="finger" name="{side}_pad' in ln]
+        assert len(pads) == 2
+        mesh_pad = f'        <geom class="finger" name="{side}_pad" type="mesh" mesh="{side}_pad"/>'
+        gripper = gripper.replace(pads[0], mesh_pad).replace(pads[1] + "\n", "")
+    path = write_toy_robot(tmp_path, gripper=gripper)
+    for side, sign in (("a", 1), ("b", -1)):
+        (tmp_path / "meshes" / f"{side}_pad.obj").write_text(_sheared_pad_obj(sign))
+    comp = load_robot(path)
+    cal = comp.robot.calibration
+    m = comp.model
+    assert {cal.pads[0], cal.pads[1]} == {("a_pad",), ("b_pad",)}
+    pad = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "gripper/a_pad")
+    quat_mesh = m.geom_quat[pad]
+    assert abs(quat_mesh[0]) < 1.0 - 1e-3  # the mesh's frame is turned
+    assert cal.closed_width == pytest.approx(0.004, abs=1e-5)
+    assert cal.open_width == pytest.approx(0.004 + 2 * 0.045, abs=1e-5)
+    width = 2.0 * cal.brick_half_extents[1]
+    assert width - 5e-4 < cal.gap_on_brick <= width  # the stiff pads sink in by < 0.5 mm
+
+
 # Fingers that pass each other when closed free (free gap -16 mm) on position actuators without a
 # force range: the squeeze is the gain times the command's travel past the brick, and the
 # command for a gap of 0 (where a plan's close ends) leaves a third of it out (robosuite's

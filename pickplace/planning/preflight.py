@@ -11,13 +11,14 @@ predicts the commanded joint path, up to the coarser rate the pre-flight runs at
    commanded speed above its limit;
 3. the Jacobian: σmin at least :attr:`PreflightConfig.min_singular_value`;
 4. collisions: every robot geom (arm links, palm, fingers at their commanded width, or at the
-   grasped brick's width while holding it) and the brick while it is held, against every world
-   geom (bins, floor, obstacles), at least :attr:`PreflightConfig.clearance` apart. MuJoCo's own
-   collision detection (``mj_collision`` with geom margins) runs on a kinematic copy of the
-   scene's model; the robot never collides with the brick there (the grasp is the physics'
-   job), and the held brick ignores the geoms it rests against at its start and goal poses:
-   those within the clearance of it there (the floor under it, a wall beside it), which the
-   plan leaves and reaches along straight vertical moves (lift, place).
+   grasped brick's width from the pick, where they close onto it, until they let go of it) and
+   the brick while it is held, against every world geom (bins, floor, obstacles), at least
+   :attr:`PreflightConfig.clearance` apart. MuJoCo's own collision detection (``mj_collision``
+   with geom margins) runs on a kinematic copy of the scene's model; the robot never collides
+   with the brick there (the grasp is the physics' job), and the held brick ignores the geoms
+   it rests against at its start and goal poses: those within the clearance of it there (the
+   floor under it, a wall beside it), which the plan leaves and reaches along straight
+   vertical moves (lift, place).
 
 The first problem found ends the pre-flight; a plan without problems is feasible, and its
 margins over the whole plan are reported.
@@ -250,6 +251,8 @@ class Preflight:
         X_GO = plan.X_OG.inverse() if plan.X_OG is not None else None
         width_held = grasp_width(plan, sc)
         held = (phases.grip_closed, phases.release) if phases and X_GO is not None else None
+        # From the pick on, the brick is between the fingers: they close onto it, no further.
+        on_brick = (phases.approach[1], phases.release) if held is not None and phases else None
         X_WO_end = X_WO_goal if X_WO_goal is not None else X_WO_start
         pair_kind = self.pair_kinds(X_WO_start, X_WO_end)
         command, sample = self.controller.command, traj.sample
@@ -286,6 +289,7 @@ class Preflight:
             X_WO = X_WO_start if held is None or t < held[0] else X_WO_end
             if is_held and X_GO is not None:
                 X_WO = SE3(res.x_WG) @ X_GO
+            if on_brick is not None and on_brick[0] <= t < on_brick[1]:
                 width = max(width, width_held)
             clearance, contact = self._closest(q, width, X_WO, pair_kind, is_held)
             clear_path[i] = clearance
