@@ -22,7 +22,8 @@ from pickplace.planning.candidates import (
     gravity_torque,
 )
 from pickplace.planning.plan import PlanConfig, plan_pick_place
-from pickplace.planning.planner import PickPlacePlanner
+from pickplace.planning.planner import REFUSAL_CAUSES, PickPlacePlanner
+from pickplace.planning.preflight import PreflightConfig
 from pickplace.robot.calibration import MIN_PAD_CLEARANCE, PAD_CLEARANCE
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.checks import FailureReason
@@ -230,6 +231,7 @@ def test_no_feasible_plan_ends_the_run_before_any_physics(scene: Scene) -> None:
     result = sim.run()
     s = result.summary()
     assert result.failure is FailureReason.NO_FEASIBLE_PLAN
+    assert report.refusal_cause == s["refusal"] == "footprint"  # the cheap test refused all
     assert (s["ticks"], s["failure_tick"], s["success"]) == (0, 0, False)
     rejected = [e for e in s["events"] if e["kind"] == "plan"]
     assert len(rejected) == 1
@@ -327,3 +329,25 @@ def test_a_sweep_that_outruns_slow_joints_is_swept_again_slower(
     again = PickPlacePlanner(scene, "qp").plan(X_WO_pick, X_WO_place)
     assert again.feasible and again.chosen == 0
     assert again.candidates[0].preflight.peak_speed_ratio <= 1.0
+
+
+def test_a_refusal_names_its_cause_from_the_cheap_tests_or_the_pre_flight(scene: Scene) -> None:
+    """``refusal_cause``: ``reach`` when every candidate's tool lies beyond the arm's reach,
+    else the best candidate's first pre-flight problem; none for a feasible plan, and a run
+    summary has the key only when it was refused."""
+    X_pick, X_place = _poses(scene, 0.0, 0.0, 0.0)
+    planner = PickPlacePlanner(scene, "qp")
+    assert planner.plan(X_pick, X_place).refusal_cause is None
+    assert "refusal" not in finished().summary()
+    far = SE3.from_rotation_and_translation(X_place.rotation(), np.array([3.0, 0.0, 0.035]))
+    report = planner.plan(X_pick, far)
+    assert report.refusal_cause == "reach" and report.candidates[0].refused_by == "reach"
+    assert report.candidates[0].preflight.problem.kind == "ik"
+    # Every tool pose "near a singularity": the candidates pass the cheap tests and the
+    # pre-flight refuses them for it.
+    strict = PickPlacePlanner(scene, "qp", preflight=PreflightConfig(min_singular_value=10.0))
+    report = strict.plan(X_pick, X_place)
+    assert report.candidates[0].refused_by is None
+    assert report.refusal_cause == "singularity" == report.candidates[0].preflight.problem.kind
+    kinds = {"ik", "joint-limit", "speed-limit", "singularity", "collision"}  # Problem.kind
+    assert set(REFUSAL_CAUSES) == {"reach", "footprint", *kinds}

@@ -23,11 +23,13 @@ from pickplace.sweep.recording import (
     SUCCESS_COLOR,
     bin_outline_W,
     callout_anchors_W,
+    map_outcome,
     outcome_colors,
     rate_color,
     report_markdown,
     write_sweep_recording,
 )
+from pickplace.sweep.report import report_text
 from pickplace.sweep.stats import wilson_interval
 from pickplace.sweep.sweep import SweepRequest, run_sweep, sweep_report
 from pickplace.world.placements import random_placement
@@ -350,3 +352,44 @@ def test_a_real_sweep_is_recorded(tmp_path: Path, scene: Scene) -> None:
     assert not any(name.startswith("plots/") for name in ents)  # nothing varied, no chart
     (text,) = ents["report"].static["TextDocument:text"]
     assert f"{report['successes']} of 3 succeeded" in text
+
+
+def test_refusals_are_counted_and_drawn_by_cause(scene: Scene, tmp_path: Path) -> None:
+    """A coverage sweep's refusals: the report counts them per cause (most frequent first),
+    its text says so, and the bin's picture has one coloured group per cause."""
+    plan = parse_vary(["brick_mass=0.2:1"])  # light bricks: every trial succeeds, but
+    trials, draws = synthetic_trials(scene, plan, range(8))
+    causes = ["footprint", "singularity", "footprint", None, "footprint", "joint-limit"]
+    for t, cause in zip(trials, causes, strict=False):  # these five, refused
+        if cause is not None:
+            t.update(success=False, failure="no-feasible-plan", refusal=cause)
+    report = sweep_report(SweepRequest(trials=len(trials), workers=1, vary=plan), trials, 1.0)
+    refused = report["failures"]["no-feasible-plan"]
+    assert refused["count"] == 5
+    assert list(refused["by_cause"].items()) == [
+        ("footprint", 3),
+        ("joint-limit", 1),
+        ("singularity", 1),
+    ]
+    assert "by cause: footprint 3, joint-limit 1, singularity 1" in report_text(report)
+    assert "| … footprint | 3 | |" in report_markdown(report)
+    write_sweep_recording(tmp_path / "causes.rrd", trials, report, plan, draws, scene=scene)
+    entities = read_entities(tmp_path / "causes.rrd")
+    footprint = entities["world/trials/no-feasible-plan/footprint"].static
+    np.testing.assert_allclose(
+        footprint["Points3D:positions"],
+        [t["brick_start_xyz"] for t in trials if t.get("refusal") == "footprint"],
+        atol=1e-6,
+    )
+    assert all(
+        label.startswith("no-feasible-plan (footprint) · seed ")
+        for label in footprint["Points3D:labels"]
+    )
+    colors = {
+        entities[f"world/trials/no-feasible-plan/{c}"].static["Points3D:colors"][0]
+        for c in ("footprint", "singularity", "joint-limit")
+    }
+    assert len(colors) == 3 and _rgba(SUCCESS_COLOR) not in colors
+    legend = entities["world/legend"].static["Points3D:labels"]
+    assert "no-feasible-plan (footprint) (3)" in legend
+    assert map_outcome(trials[3]) == "success" and "refusal" not in trials[3]

@@ -155,6 +155,23 @@ measured the others sharing the turn, or the path overshooting it, by up to abou
 
 
 PLANNERS = ("cartesian", "c-space")
+
+_UNREACHABLE = "unreachable"  # how a reach problem's text starts (Ranked.cheap_test)
+
+#: Why a planning found no feasible plan, by the best candidate's first problem
+#: (:attr:`PlanningReport.refusal_cause`): the two cheap tests that refuse a candidate before
+#: any pre-flight, then the pre-flight's problem kinds (:class:`~pickplace.planning.preflight.
+#: Problem`). A coverage sweep counts its refusals by these (``pickplace sweep``'s report).
+REFUSAL_CAUSES: dict[str, str] = {
+    "reach": "no candidate within the arm's reach (the tool at the pick or the place)",
+    "footprint": "no candidate's open hand clear of the bin's walls and floor at the pick or "
+    "the place (the cheap footprint test)",
+    "collision": "the best candidate's robot or held object within the clearance of the world",
+    "singularity": "the best candidate's tool Jacobian near a singularity",
+    "joint-limit": "the best candidate's joint within its margin of a limit",
+    "speed-limit": "the best candidate's joint commanded above its speed limit",
+    "ik": "the best candidate's IK without a solution, or falling behind the plan",
+}
 """Where a motion of a plan comes from: the Cartesian keyframes or the C-space planner."""
 
 
@@ -218,6 +235,8 @@ class Candidate:
         warning: What the timing could not honour (the slip budget of a brick too heavy for
             the grip), or None.
         cspace: Its transfer planned in C-space, or None (every motion Cartesian).
+        refused_by: The cheap test that refused it before any pre-flight (``"reach"`` or
+            ``"footprint"``, see :data:`REFUSAL_CAUSES`), or None (it was pre-flighted).
     """
 
     label: str
@@ -225,6 +244,7 @@ class Candidate:
     preflight: PreflightResult
     warning: str | None = None
     cspace: CSpaceAttempt | None = None
+    refused_by: str | None = None
 
     def motions(self) -> list[Motion]:
         """Each motion of the plan (between keyframes where the tool moves) and its planner."""
@@ -301,6 +321,19 @@ class PlanningReport:
         p = best.preflight.problem
         assert p is not None  # an infeasible candidate has a problem
         return f"the best candidate, '{best.label}', at t={p.t:.2f} s: {p.text}"
+
+    @property
+    def refusal_cause(self) -> str | None:
+        """Why no plan is feasible, as one key of :data:`REFUSAL_CAUSES`: the cheap test that
+        refused every candidate, else the kind of the best candidate's first problem; None if
+        a plan is feasible."""
+        if self.feasible:
+            return None
+        best = self.candidates[0]
+        if best.refused_by is not None:
+            return best.refused_by
+        assert best.preflight.problem is not None  # an infeasible candidate has a problem
+        return best.preflight.problem.kind
 
     def problems(self) -> str:
         """Each candidate's first problem, one clause each."""
@@ -392,6 +425,13 @@ class Ranked:
     wrist_travel: float
     torque: float
     arm: float
+
+    @property
+    def cheap_test(self) -> str | None:
+        """The cheap test it fails, ``"reach"`` or ``"footprint"``, or None."""
+        if self.problem is None:
+            return None
+        return "reach" if self.problem.startswith(_UNREACHABLE) else "footprint"
 
     def key(self) -> tuple[bool | float, ...]:
         """Sort key: passing first, then the order of the module docstring; failing ones
@@ -630,7 +670,11 @@ class PickPlacePlanner:
         if not tried:  # none passed the cheap tests: the best one, with its problem
             best = ranked[0]
             plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp, start=start)
-            tried.append(Candidate(best.grasp.label, plan, self._refused(plan, best)))
+            tried.append(
+                Candidate(
+                    best.grasp.label, plan, self._refused(plan, best), refused_by=best.cheap_test
+                )
+            )
         total = time.perf_counter() - t0
         times = {"cartesian": total - self._cspace_time, "c-space": self._cspace_time}
         return PlanningReport(
@@ -749,7 +793,7 @@ class PickPlacePlanner:
         t = plan.phases.approach[1] if plan.phases is not None else 0.0
         p = plan.trajectory.sample(t)[0][4:]  # wxyz_xyz of the tool at the pick
         point = (float(p[0]), float(p[1]), float(p[2]))
-        kind = "ik" if (ranked.problem or "").startswith("unreachable") else "collision"
+        kind = "ik" if ranked.cheap_test == "reach" else "collision"
         problem = Problem(t, kind, ranked.problem or "", point)
         nq = self.scene.robot.n_joints
         return PreflightResult(
@@ -855,8 +899,8 @@ class PickPlacePlanner:
             problem = None
             if far[i] > self.reach:
                 problem = (
-                    f"unreachable: the tool is {far[i]:.3f} m from the arm's first joint, beyond "
-                    f"its reach {self.reach:.3f} m (the sum of its link lengths)"
+                    f"{_UNREACHABLE}: the tool is {far[i]:.3f} m from the arm's first joint, "
+                    f"beyond its reach {self.reach:.3f} m (the sum of its link lengths)"
                 )
             elif near[i] < clearance:
                 problem = "footprint"  # worded below, for the best-ranked only

@@ -312,6 +312,8 @@ class RunResult:
         out["plan"] = None if planning is None else planning.as_dict()
         if planning is not None and planning.used_cspace:  # only when C-space was planned
             out["planner_time_s"] = dict(planning.planner_time_s)
+        if self.failure is FailureReason.NO_FEASIBLE_PLAN and planning is not None:
+            out["refusal"] = planning.refusal_cause  # only when refused: a REFUSAL_CAUSES key
         out["events"] = [
             {"tick": e.tick, "t": e.t, "level": e.level, "kind": e.kind.value, "text": e.text}
             for e in self.events

@@ -15,7 +15,11 @@ Entity path                                Contents
 ``world/source_bin/arm_side``              label on the wall that faces the arm's base
 ``world/trials/<outcome>``                 one point per trial at its ``brick_start_xyz``,
                                            coloured by outcome (``success`` or the failure
-                                           reason), labelled ``reason · seed N`` (on hover)
+                                           reason), labelled ``reason · seed N`` (on hover);
+                                           refusals per cause (the trial's ``refusal``) under
+                                           ``world/trials/no-feasible-plan/<cause>``, each a
+                                           colour, labelled ``no-feasible-plan (footprint) ·
+                                           seed N`` (:func:`map_outcome`)
 ``world/callouts/labels``, ``.../leaders`` up to ``MAX_SHOWN_LABELS`` failed trials: their labels
                                            in a column outside the bin's -x wall, one row each
                                            (never overlapping), a leader line to each point
@@ -181,10 +185,13 @@ def _log_trials(
     by_outcome: dict[str, list[Mapping[str, Any]]] = {}
     for t in trials:
         if t.get("brick_start_xyz") is not None:
-            by_outcome.setdefault(outcome_of(t), []).append(t)
+            by_outcome.setdefault(map_outcome(t), []).append(t)
     for outcome, group in by_outcome.items():
+        parts = [outcome_of(group[0])]  # a refusal's cause below its reason: .../<reason>/<cause>
+        if outcome != parts[0]:
+            parts.append(str(group[0]["refusal"]))
         rec.log(
-            f"{base}/{rr.escape_entity_path_part(outcome)}",
+            "/".join([base, *(rr.escape_entity_path_part(part) for part in parts)]),
             rr.Points3D(
                 np.array([t["brick_start_xyz"] for t in group], dtype=np.float64),
                 radii=[POINT_RADIUS],
@@ -200,7 +207,7 @@ def _log_trials(
         if offset is not None and t.get("brick_start_xyz") is not None:
             origins.append(t["brick_start_xyz"])
             vectors.append(offset)
-            arrow_colors.append(colors[outcome_of(t)])
+            arrow_colors.append(colors[map_outcome(t)])
     if origins:
         rec.log(
             f"{base}/pose_offsets",
@@ -209,10 +216,21 @@ def _log_trials(
         )
 
 
-def trial_label(trial: Mapping[str, Any], arm: str = "") -> str:
-    """A trial's label: ``seed 9`` for a success, ``missed-grasp · seed 14`` for a failure
-    (prefixed by its arm in a comparison, ``controller=pinv: …``)."""
+def map_outcome(trial: Mapping[str, Any]) -> str:
+    """A trial's outcome as the bin's picture shows it: ``success`` or its failure reason
+    (:func:`~pickplace.sweep.report.outcome_of`), a refusal with its cause,
+    ``no-feasible-plan (footprint)`` (the trial's ``refusal``), so that the picture shows where
+    in the bin each cause refuses."""
     outcome = outcome_of(trial)
+    cause = trial.get("refusal")
+    return f"{outcome} ({cause})" if cause and not trial["success"] else outcome
+
+
+def trial_label(trial: Mapping[str, Any], arm: str = "") -> str:
+    """A trial's label: ``seed 9`` for a success, ``missed-grasp · seed 14`` for a failure,
+    ``no-feasible-plan (footprint) · seed 3`` for a refusal (prefixed by its arm in a
+    comparison, ``controller=pinv: …``)."""
+    outcome = map_outcome(trial)
     text = f"seed {trial['seed']}" if outcome == "success" else f"{outcome} · seed {trial['seed']}"
     return f"{arm}: {text}" if arm else text
 
@@ -532,6 +550,8 @@ def _outcome_markdown(
             seeds = f["seeds"]
             shown = " ".join(map(str, seeds[:20])) + (" …" if len(seeds) > 20 else "")
             lines.append(f"| {reason} | {f['count']} | {shown} |")
+            for cause, n in (f.get("by_cause") or {}).items():
+                lines.append(f"| … {cause} | {n} | |")
         lines.append("")
         for reason, f in failures:
             text = f.get("example")
@@ -740,7 +760,7 @@ def log_sweep(
 
     by_parameter = bins_of(report, trials) if varied else {}
     arm_outcomes = (report.get("compare") or {}).get("arms", {})
-    colors = outcome_colors([outcome_of(t) for t in trials])
+    colors = outcome_colors([map_outcome(t) for t in trials])
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     _log_bin(rec, scene.source_bin, scene.robot.p_W_base)
     arms = _arms_of(trials)
@@ -753,11 +773,11 @@ def log_sweep(
         failed += [
             (np.asarray(t["brick_start_xyz"], dtype=np.float64), trial_label(t, arm), colors[o])
             for t in group
-            if (o := outcome_of(t)) != "success" and t.get("brick_start_xyz") is not None
+            if (o := map_outcome(t)) != "success" and t.get("brick_start_xyz") is not None
         ]
         counts: dict[str, int] = {}
         for t in group:
-            counts[outcome_of(t)] = counts.get(outcome_of(t), 0) + 1
+            counts[map_outcome(t)] = counts.get(map_outcome(t), 0) + 1
         ordered = sorted(counts.items(), key=lambda kv: (kv[0] != "success", -kv[1], kv[0]))
         legend += [(f"{arm}: " * bool(arm) + f"{o} ({c})", colors[o]) for o, c in ordered]
         if plan is not None and varied:
@@ -890,6 +910,7 @@ __all__ = [
     "commit_recording",
     "encode_sweep",
     "log_sweep",
+    "map_outcome",
     "outcome_colors",
     "outcome_of",
     "record_sweep",

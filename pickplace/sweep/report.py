@@ -4,7 +4,8 @@ From the trials' compact summaries (:func:`pickplace.sweep.sweep.compact_summary
 
 - the success rate with its 95 % Wilson interval (:func:`pickplace.sweep.stats.wilson_interval`);
 - failures by reason, with their seeds, the failure text of the first one and the command
-  that re-runs it alone;
+  that re-runs it alone; ``no-feasible-plan`` also counted by its refusal cause (why the
+  planner refused: :data:`pickplace.planning.planner.REFUSAL_CAUSES`);
 - p50 / p95 / max of the metrics in :data:`METRICS` (and p5 / min where low is worse);
 - the success rate per bin of each varied parameter (:func:`pickplace.sim.vary.success_by_bin`);
 - with ``--compare``: the same per arm, and for each pair of arms the paired comparison on
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -111,15 +113,20 @@ def _failures(
     trials: Sequence[Mapping[str, Any]], arms: Mapping[str, Arm]
 ) -> tuple[dict[str, list[int]], dict[str, dict[str, Any]]]:
     """Seeds per failure reason, and per reason its count, seeds, first failure's text and
-    the command that re-runs it (the trial of the smallest seed, first arm first)."""
+    the command that re-runs it (the trial of the smallest seed, first arm first); for
+    ``no-feasible-plan`` also its count per refusal cause (the trials' ``refusal``, most
+    frequent first)."""
     seeds: dict[str, list[int]] = {}
     first: dict[str, Mapping[str, Any]] = {}
+    causes: dict[str, Counter[str]] = {}
     for t in trials:
         if t["success"]:
             continue
         reason = outcome_of(t)
         seeds.setdefault(reason, []).append(int(t["seed"]))
         first.setdefault(reason, t)
+        if t.get("refusal"):
+            causes.setdefault(reason, Counter())[str(t["refusal"])] += 1
     details = {}
     for reason in sorted(seeds):
         t = first[reason]
@@ -131,6 +138,10 @@ def _failures(
             "example": t.get("failure_text") or t.get("detail"),
             "rerun": None if arm is None else arm.rerun_command(int(t["seed"])),
         }
+        if reason in causes:
+            details[reason]["by_cause"] = dict(
+                sorted(causes[reason].items(), key=lambda kv: (-kv[1], kv[0]))
+            )
         if t.get("arm"):
             details[reason]["example_arm"] = t["arm"]
     return dict(sorted(seeds.items())), details
@@ -287,6 +298,9 @@ def _outcome_lines(r: Mapping[str, Any], plan_units: Mapping[str, str], indent: 
         seeds = f["seeds"]
         shown = " ".join(map(str, seeds[:SHOWN_SEEDS])) + (" …" if len(seeds) > SHOWN_SEEDS else "")
         lines.append(f"{indent}{reason}: {f['count']} (seeds {shown})")
+        if f.get("by_cause"):
+            by = ", ".join(f"{cause} {n}" for cause, n in f["by_cause"].items())
+            lines.append(f"{indent}  by cause: {by}")
         if f.get("example"):
             lines.append(f"{indent}  seed {f['example_seed']}: {f['example']}")
         if f.get("rerun"):

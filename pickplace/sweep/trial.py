@@ -45,6 +45,7 @@ TRIAL_KEYS = (
     "max_position_error_m",
     "max_robot_world_contact_force_n",
     "sim_time_s",
+    "refusal",
 )
 
 
