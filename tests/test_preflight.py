@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from mink.lie import SE3
 
+from pickplace.control.controllers import POSTURE_GAIN_PERIOD, QPWeights
+from pickplace.errors import ControllerError
 from pickplace.planning.plan import grasp_width
 from pickplace.planning.planner import Candidate, PickPlacePlanner
 from pickplace.planning.preflight import Preflight, PreflightConfig, collision_model
@@ -49,6 +51,34 @@ def test_at_the_control_rate_it_predicts_the_commanded_joint_path_exactly(
     # after tick k's step, i.e. the pre-flight's row k + 1.
     np.testing.assert_allclose(result.q[1 : n + 1], sim.log.q_cmd[:n], rtol=0.0, atol=atol)
     assert (getattr(sim.controller, "collision", None) is not None) == (controller == "qp")
+
+
+def test_at_its_own_rate_it_predicts_a_redundant_arm_s_null_space_within_0_05_rad() -> None:
+    """At 20 Hz the pre-flight's joint path is the 100 Hz run's, the 7-joint arm's elbow
+    included: the posture task closes the same fraction of its error per second at both
+    rates (with a gain per tick it closed five times less per second at 20 Hz, and the
+    nominal plan's joints differed by 0.16 rad)."""
+    _, task, sim = prepare(RunRequest())
+    assert sim.scene.robot.n_joints == 7
+    result = Preflight(sim.scene, "qp").run(
+        task.plan, task.X_WO_start, task.goal.X_WO_goal, stop_at_problem=False
+    )
+    sim.advance()
+    ticks = np.round(result.times / sim.dt).astype(int)
+    inside = ticks < sim.ticks
+    diff = np.abs(sim.log.q_cmd[ticks[inside]] - result.q[inside]).max()
+    assert diff < 0.05
+
+
+def test_the_posture_gain_closes_the_same_fraction_per_second_at_any_rate() -> None:
+    w = QPWeights()
+    assert w.posture_gain_at(POSTURE_GAIN_PERIOD) == w.posture_gain  # the stated gain, exactly
+    for dt in (0.002, 0.01, 0.05, 0.1):
+        left = (1.0 - w.posture_gain_at(dt)) ** round(0.1 / dt)  # after 0.1 s
+        assert left == pytest.approx((1.0 - w.posture_gain) ** 10, rel=1e-12)
+    for bad in (0.0, -0.1, 1.5):
+        with pytest.raises(ControllerError, match=r"posture gain .*valid: \(0, 1\]"):
+            QPWeights(posture_gain=bad)
 
 
 def test_a_nominal_plan_is_feasible_with_stated_margins(scene: Scene) -> None:
