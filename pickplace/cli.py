@@ -486,6 +486,13 @@ REFUSAL_ADVICE = {
 }
 
 
+def _cause_text(cause: str) -> str:
+    """A refusal's cause (a summary's ``refusal``) with what it means."""
+    from pickplace.planning.planner import REFUSAL_CAUSES  # a run or plan has imported it
+
+    return f"{cause} ({REFUSAL_CAUSES[cause]})" if cause in REFUSAL_CAUSES else cause
+
+
 def _refusal_text(s: dict[str, Any], title: str) -> str:
     """A run refused before any physics (no-feasible-plan): each candidate's first problem
     and what to change; no metrics, since nothing moved."""
@@ -495,6 +502,8 @@ def _refusal_text(s: dict[str, Any], title: str) -> str:
         f"{title}: REFUSED (no-feasible-plan): none of the {len(candidates)} candidate plans "
         "passed the pre-flight, so nothing was simulated"
     ]
+    if s.get("refusal"):
+        lines.append(f"  cause: {_cause_text(s['refusal'])}")
     params = _parameters_text(s.get("parameters"))
     if params:
         lines.append(f"  parameters: {params}")
@@ -641,6 +650,8 @@ def _cmd_plan(args: argparse.Namespace, stop: InterruptHandler) -> int:
         "planning_time_s": report.planning_time_s,
         "planner_time_s": dict(report.planner_time_s),
     }
+    if not report.feasible:  # why, in one word, as a refused run's summary has it
+        out["refusal"] = report.refusal_cause
     _write_stdout(json.dumps(out) if args.json else _human_plan(out))
     return EXIT_OK if report.feasible else EXIT_FAILED
 
@@ -653,6 +664,8 @@ def _human_plan(p: dict[str, Any]) -> str:
     else:
         head += f"NO feasible plan ({n} candidate(s) tried"
     lines = [head + f" in {p['planning_time_s'] * 1000:.1f} ms)"]
+    if p.get("refusal"):
+        lines.append(f"  cause: {_cause_text(p['refusal'])}")
     per = p.get("planner_time_s") or {}
     if per:
         lines.append(

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from pickplace.cli import _human_summary
-from pickplace.planning.planner import PickPlacePlanner
+from pickplace.planning.planner import REFUSAL_CAUSES, PickPlacePlanner
 from pickplace.robot import listing
 from pickplace.robot.description import RobotDescription
 from pickplace.robot.registry import bundled_robots
@@ -75,6 +75,7 @@ def test_a_refused_run_prints_the_refusal_not_a_run_s_metrics() -> None:
     head, *rest = text.splitlines()
     assert head.startswith("pick-place / iiwa14-wsg50 / qp / seed 0: REFUSED (no-feasible-plan)")
     assert f"none of the {len(report.candidates)} candidate plans" in head
+    assert rest[0] == f"  cause: footprint ({REFUSAL_CAUSES['footprint']})"
     for word in ("ticks", "real time", "singular value", "place error", "nan"):
         assert word not in text, text
     listed = [line for line in rest if line.startswith("    ")]

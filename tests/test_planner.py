@@ -250,6 +250,8 @@ def test_corner_brick_is_refused_by_run_and_reported_by_plan(cli: Callable[..., 
     assert proc.returncode == 1
     report = json.loads(proc.stdout)
     assert report["feasible"] is False and report["chosen"] is None
+    assert report["refusal"] == "footprint"
+    assert "refusal" not in json.loads(cli("plan", "--json").stdout)  # feasible
     assert len(report["candidates"]) == 1  # the best; none passed the footprint
     for c in report["candidates"]:
         assert c["feasible"] is False

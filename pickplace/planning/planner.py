@@ -163,9 +163,9 @@ _UNREACHABLE = "unreachable"  # how a reach problem's text starts (Ranked.cheap_
 #: any pre-flight, then the pre-flight's problem kinds (:class:`~pickplace.planning.preflight.
 #: Problem`). A coverage sweep counts its refusals by these (``pickplace sweep``'s report).
 REFUSAL_CAUSES: dict[str, str] = {
-    "reach": "no candidate within the arm's reach (the tool at the pick or the place)",
+    "reach": "no candidate's tool within the arm's reach at the pick or the place",
     "footprint": "no candidate's open hand clear of the bin's walls and floor at the pick or "
-    "the place (the cheap footprint test)",
+    "the place",
     "collision": "the best candidate's robot or held object within the clearance of the world",
     "singularity": "the best candidate's tool Jacobian near a singularity",
     "joint-limit": "the best candidate's joint within its margin of a limit",
