@@ -122,15 +122,15 @@ def test_a_narrow_gripper_closes_across_the_length_with_what_it_opens_beyond_it(
         assert by_name["across the length"] == {round(2.0 * length_clearance, 12)}
 
 
-def test_the_open_hand_s_footprint_is_the_distance_of_its_boxes_to_the_walls(
+def test_the_open_hand_s_footprint_is_the_distance_of_its_hulls_to_the_walls(
     scene: Scene,
 ) -> None:
     """The hand straight down over bin 1's centre: its smallest distance to the walls is the
-    inner half width less the boxes' largest extent along that axis; moved towards the +y wall
-    by d, the distance falls by d."""
+    inner half width less the largest extent along that axis of each hull's part below the
+    walls' top (computed here from every pair of a hull's vertices, not from its edges); moved
+    towards the +y wall by d, the distance falls by d."""
     planner = PickPlacePlanner(scene, "qp")
     hand, width = planner.hand, 0.062
-    corners = hand.corners_G(width)
     bin_ = scene.source_bin
     floor_z = float(bin_.to_bin_frame(bin_.center_W)[2])
     R_BG = np.diag([1.0, -1.0, -1.0])  # pointing down
@@ -140,18 +140,24 @@ def test_the_open_hand_s_footprint_is_the_distance_of_its_boxes_to_the_walls(
         d, _, _ = hand.distances(R_BG[None], (p + np.array([0.0, shift, 0.0]))[None], width, bin_)
         return float(d[0])
 
-    P = corners @ R_BG.T + p
+    P = hand.hull_G(width) @ R_BG.T + p
     top = floor_z + bin_.wall_top_z - bin_.floor_top_z
-    # Pointing straight down the boxes stay axis-aligned: a box reaching below the top has
-    # its whole xy extent there.
-    low = P[P[..., 2].min(axis=1) < top].reshape(-1, 3)
+    low = []
+    for k in range(len(hand.geom_ids)):
+        V = P[hand.hull_geom == k]
+        below, above = V[V[:, 2] < top], V[V[:, 2] >= top]
+        low.append(below)
+        for a in below:  # where the segment to each vertex above crosses the top
+            t = (top - a[2]) / (above[:, 2] - a[2])
+            low.append(a + t[:, None] * (above - a))
+    pts = np.concatenate(low)
     expected = min(
-        float(bin_.inner_half_extents[0] - np.abs(low[:, 0]).max()),
-        float(bin_.inner_half_extents[1] - np.abs(low[:, 1]).max()),
-        float(low[:, 2].min() - floor_z),
+        float(bin_.inner_half_extents[0] - np.abs(pts[:, 0]).max()),
+        float(bin_.inner_half_extents[1] - np.abs(pts[:, 1]).max()),
+        float(P[:, 2].min() - floor_z),
     )
     assert distance(0.0) == pytest.approx(expected, abs=1e-12)
-    y_extent = float(low[:, 1].max())
+    y_extent = float(pts[:, 1].max())
     shift = float(bin_.inner_half_extents[1]) - y_extent - 0.001  # 1 mm from the +y wall
     assert distance(shift) == pytest.approx(0.001, abs=1e-12)
     X_WG = SE3.from_rotation_and_translation(

@@ -20,11 +20,11 @@ where it does not):
   swapped (the wrist turned half a turn about the approach axis).
 
 The cheap tests (:class:`HandFootprint`, :func:`gravity_torque`) need no IK: the open hand's
-collision boxes placed at the grasp against the bin's walls and floor, and the object's weight
-about the pad axis. The wrist's margin needs the arm, and is the planner's
-(:mod:`pickplace.planning.planner`). :class:`HandObjectGaps` does not depend on where the
-object lies: the planner drops, once, the candidates whose hand touches the object with more
-than its pads.
+collision geoms' convex hulls (:func:`hull_of`) placed at the grasp against the bin's walls and
+floor, and the object's weight about the pad axis. The wrist's margin needs the arm, and is
+the planner's (:mod:`pickplace.planning.planner`). :class:`HandObjectGaps` does not depend on
+where the object lies: the planner drops, once, the candidates whose hand touches the object
+with more than its pads.
 """
 
 from __future__ import annotations
@@ -291,6 +291,138 @@ def gravity_torque(X_WO: SE3, X_OG: SE3, p_O_com: npt.ArrayLike, mass: float) ->
     return float(abs(y_W @ np.cross(r, force)))
 
 
+ROUND_SIDES = 16
+"""Sides of the polytope :func:`hull_of` puts around a round geom (sphere, capsule, cylinder,
+ellipsoid) about its axis; half as many latitude steps over a half turn."""
+
+
+def _round_hull(
+    kind: int, size: np.ndarray, sides: int = ROUND_SIDES
+) -> tuple[np.ndarray, np.ndarray]:
+    """A polytope around a sphere, capsule, cylinder or ellipsoid (MuJoCo's sizes), in its
+    frame: rings of ``sides`` vertices scaled out so that the rings' polygons and the
+    latitude steps circumscribe the round surface, and the edges along and between them."""
+    theta = 2.0 * math.pi * np.arange(sides) / sides
+    ring = np.stack([np.cos(theta), np.sin(theta)], axis=1) / math.cos(math.pi / sides)
+    rings: list[tuple[float, float, float]] = []  # (radius, z) of each ring, and a pole flag
+    if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+        r, h = float(size[0]), float(size[1])
+        rings = [(r, -h, 0.0), (r, h, 0.0)]
+    else:
+        steps = sides // 2
+        scale = 1.0 / math.cos(0.5 * math.pi / steps)
+        lat = -0.5 * math.pi + math.pi * np.arange(1, steps) / steps
+        if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            r, h = float(size[0]), float(size[1])
+            # The lower hemisphere's rings about -h, the equator at both ends of the
+            # cylinder between them, the upper hemisphere's about +h.
+            low = [(r * scale * math.cos(a), -h + r * scale * math.sin(a), 0.0) for a in lat]
+            high = [(r * scale * math.cos(a), h + r * scale * math.sin(a), 0.0) for a in lat]
+            rings = [ring_ for ring_ in low if ring_[1] < -h - 1e-12]
+            rings += [(r * scale, -h, 0.0), (r * scale, h, 0.0)]
+            rings += [ring_ for ring_ in high if ring_[1] > h + 1e-12]
+            poles = (-h - r * scale, h + r * scale)
+        else:  # a sphere, or an ellipsoid: the unit sphere's polytope scaled per axis
+            for a in lat:
+                rings.append((scale * math.cos(a), scale * math.sin(a), 0.0))
+            poles = (-scale, scale)
+        rings = [(0.0, poles[0], 1.0), *rings, (0.0, poles[1], 1.0)]
+    vertices: list[np.ndarray] = []
+    edges: list[tuple[int, int]] = []
+    previous: list[int] = []
+    for radius, z, pole in rings:
+        if pole:
+            ids = [len(vertices)]
+            vertices.append(np.array([0.0, 0.0, z]))
+        else:
+            ids = list(range(len(vertices), len(vertices) + sides))
+            vertices.extend(np.array([radius * c, radius * s_, z]) for c, s_ in ring)
+            edges.extend((ids[i], ids[(i + 1) % sides]) for i in range(sides))
+        if previous:
+            if len(previous) == 1 or len(ids) == 1:
+                edges.extend((a, b) for a in previous for b in ids)
+            else:
+                edges.extend(zip(previous, ids, strict=True))
+        previous = ids
+    V = np.array(vertices)
+    if kind in (mujoco.mjtGeom.mjGEOM_SPHERE, mujoco.mjtGeom.mjGEOM_ELLIPSOID):
+        V = V * (size if kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID else size[0])
+    return V, np.array(edges, dtype=np.intp)
+
+
+def hull_of(model: mujoco.MjModel, geom_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """A convex hull enclosing a geom, as vertices in the geom's frame [m] and edges (pairs of
+    vertex indices): a box's corners; a mesh's convex hull as MuJoCo compiled it (the hull
+    its collisions use); a polytope around a sphere, capsule, cylinder or ellipsoid
+    (:data:`ROUND_SIDES`); anything else (a mesh compiled without a hull), its bounding box.
+
+    Returns:
+        The vertices, (v, 3), and the edges, (m, 2).
+    """
+    kind = int(model.geom_type[geom_id])
+    size = model.geom_size[geom_id]
+    if kind == mujoco.mjtGeom.mjGEOM_BOX:
+        return _CORNER_SIGNS * size, _BOX_EDGES.copy()
+    if kind in (
+        mujoco.mjtGeom.mjGEOM_SPHERE,
+        mujoco.mjtGeom.mjGEOM_CAPSULE,
+        mujoco.mjtGeom.mjGEOM_CYLINDER,
+        mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+    ):
+        return _round_hull(kind, np.asarray(size, dtype=np.float64))
+    if kind == mujoco.mjtGeom.mjGEOM_MESH:
+        mesh = int(model.geom_dataid[geom_id])
+        adr = int(model.mesh_graphadr[mesh])
+        if adr >= 0:
+            # mjModel.mesh_graph: numvert, numface, vert_edgeadr, vert_globalid, then each
+            # vertex's neighbours (local ids), each list ended by -1.
+            graph = model.mesh_graph[adr:]
+            nv = int(graph[0])
+            edge_adr = graph[2 : 2 + nv]
+            global_id = graph[2 + nv : 2 + 2 * nv]
+            neighbours = graph[2 + 2 * nv :]
+            start = int(model.mesh_vertadr[mesh])
+            V = model.mesh_vert[start + global_id].astype(np.float64)
+            pairs = set()
+            for i in range(nv):
+                k = int(edge_adr[i])
+                while neighbours[k] >= 0:
+                    j = int(neighbours[k])
+                    pairs.add((min(i, j), max(i, j)))
+                    k += 1
+            return V, np.array(sorted(pairs), dtype=np.intp).reshape(-1, 2)
+    aabb = model.geom_aabb[geom_id]
+    return aabb[:3] + _CORNER_SIGNS * aabb[3:], _BOX_EDGES.copy()
+
+
+def _clipped_gaps(
+    R_BG: np.ndarray,
+    p_BG: np.ndarray,
+    P_G: np.ndarray,
+    edges: np.ndarray,
+    top_z: float,
+    floor_z: float,
+    half: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One convex body (vertices ``P_G`` in G [m], ``edges`` joining them) at ``n`` tool poses
+    in a bin's frame: its part below the walls' top ``top_z`` (the vertices below it and the
+    points where the edges cross it) against the inner walls (half sizes ``half``), its
+    vertices against the floor at ``floor_z``: per pose and point the distance [m] (inf for
+    a crossing that is not one) and the point in B [m], shapes (n, v + m), (n, v + m, 3)."""
+    P = P_G @ R_BG.transpose(0, 2, 1) + p_BG[:, None, :]  # (n, v, 3)
+    z = P[..., 2]
+    A, Bp = P[:, edges[:, 0]], P[:, edges[:, 1]]  # (n, m, 3)
+    za, zb = A[..., 2] - top_z, Bp[..., 2] - top_z
+    crossing = za * zb < 0.0
+    t = np.where(crossing, za / np.where(crossing, za - zb, 1.0), 0.0)
+    pts = np.concatenate([P, A + t[..., None] * (Bp - A)], axis=1)  # (n, v + m, 3)
+    below = np.concatenate([z < top_z, crossing], axis=1)
+    gap = np.where(below, (half - np.abs(pts[..., :2])).min(axis=-1), np.inf)
+    v = len(P_G)
+    gap[:, :v] = np.minimum(gap[:, :v], z - floor_z)
+    return gap, pts
+
+
 @dataclass(frozen=True)
 class FootprintProblem:
     """Where the open hand meets a bin, at its worst point.
@@ -309,10 +441,14 @@ class FootprintProblem:
 
 
 class HandFootprint:
-    """The open hand's collision geoms as boxes in the tool frame, at any open width.
+    """The open hand's collision geoms in the tool frame, at any open width.
 
-    Each geom's bounding box in its own frame (MuJoCo's ``geom_aabb``: exact for a box,
-    enclosing for a mesh, capsule or cylinder) is taken into G with the fingers at the width
+    For the footprint (:meth:`distances`) each geom is its convex hull as vertices and edges
+    in G (:func:`hull_of`: a box's corners, a mesh's hull as MuJoCo compiled it, a round
+    geom's circumscribed polytope); for the separating-axis bounds of
+    :class:`HandObjectGaps`, each geom's bounding box in its own frame (MuJoCo's
+    ``geom_aabb``: exact for a box, enclosing for a mesh, capsule or cylinder,
+    :meth:`corners_G`). Both are taken into G with the fingers at the width
     (:meth:`~pickplace.robot.model.Robot.qpos_for_width`), once per width.
 
     Args:
@@ -345,7 +481,22 @@ class HandFootprint:
         adr, q = q_arm
         self.data.qpos[adr] = q
         self._corners: dict[float, np.ndarray] = {}
+        self._hulls: dict[float, np.ndarray] = {}
         self._posed: float | None = None
+        hulls = [hull_of(model, int(g)) for g in self.geom_ids]
+        counts = np.array([len(v) for v, _ in hulls], dtype=np.intp)
+        ends = np.cumsum(counts)
+        self._hull_local = [v for v, _ in hulls]
+        self._hull_edges_local = [e for _, e in hulls]
+        self._hull_span = [(int(b - c), int(b)) for b, c in zip(ends, counts, strict=True)]
+        self.hull_geom = np.repeat(np.arange(len(hulls), dtype=np.intp), counts)
+        # The geoms whose hull is tighter than their bounding box (all but boxes).
+        self._hull_tighter = [
+            j
+            for j, g in enumerate(self.geom_ids)
+            if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_BOX
+        ]
+        """The hand geom (an index into :attr:`geom_ids`) of each vertex of :meth:`hull_G`."""
 
     def pose(self, width: float) -> mujoco.MjData:
         """:attr:`data` with the fingers at gap ``width`` [m] and its kinematics computed
@@ -357,66 +508,106 @@ class HandFootprint:
             self._posed = width
         return self.data
 
-    def corners_G(self, width: float) -> np.ndarray:
-        """Corners of every geom's box in G with the fingers at gap ``width`` [m], (k, 8, 3)."""
-        cached = self._corners.get(width)
-        if cached is not None:
-            return cached
-        m, d = self.model, self.pose(width)
+    def _to_G(self, width: float, local: list[np.ndarray]) -> list[np.ndarray]:
+        """Points given in each geom's frame, in G with the fingers at gap ``width`` [m]."""
+        d = self.pose(width)
         R_WG = d.site_xmat[self.tool_site_id].reshape(3, 3)
         p_WG = d.site_xpos[self.tool_site_id]
-        g = self.geom_ids
-        aabb = m.geom_aabb[g]  # (k, 6): centre and half sizes in the geom frame
-        local = aabb[:, None, :3] + _CORNER_SIGNS[None] * aabb[:, None, 3:]  # (k, 8, 3)
-        R_Wg = d.geom_xmat[g].reshape(-1, 3, 3)
-        p_W = np.einsum("kij,knj->kni", R_Wg, local) + d.geom_xpos[g][:, None, :]
-        corners = (p_W - p_WG) @ R_WG  # R_WGᵀ (p_W − p_WG), row-wise
-        self._corners[width] = corners
-        return corners
+        out = []
+        for g, P in zip(self.geom_ids, local, strict=True):
+            p_W = P @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]
+            out.append((p_W - p_WG) @ R_WG)  # R_WGᵀ (p_W − p_WG), row-wise
+        return out
+
+    def corners_G(self, width: float) -> np.ndarray:
+        """Corners of every geom's bounding box in G with the fingers at gap ``width`` [m],
+        (k, 8, 3)."""
+        cached = self._corners.get(width)
+        if cached is None:
+            aabb = self.model.geom_aabb[self.geom_ids]  # (k, 6): centre, half sizes
+            local = aabb[:, None, :3] + _CORNER_SIGNS[None] * aabb[:, None, 3:]  # (k, 8, 3)
+            cached = np.stack(self._to_G(width, list(local)))
+            self._corners[width] = cached
+        return cached
+
+    def hull_G(self, width: float) -> np.ndarray:
+        """Every geom's hull vertices in G with the fingers at gap ``width`` [m], (n, 3)
+        (:attr:`hull_geom` says whose)."""
+        cached = self._hulls.get(width)
+        if cached is None:
+            cached = np.concatenate(self._to_G(width, self._hull_local))
+            self._hulls[width] = cached
+        return cached
 
     def distances(
-        self, R_BG: np.ndarray, p_BG: np.ndarray, width: float, bin_: BinGeometry
+        self,
+        R_BG: np.ndarray,
+        p_BG: np.ndarray,
+        width: float,
+        bin_: BinGeometry,
+        exact_below: float = math.inf,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The open hand at ``n`` tool poses in a bin's frame B: each pose's smallest distance
         to the bin's floor or inner walls [m].
 
-        Below the walls' top, each geom's box (clipped at the top's plane: the corners below
-        it and the points where its edges cross it) must lie inside the inner walls; a convex
-        box lies inside the convex inner prism exactly when those points do. Every corner must
-        lie above the floor.
+        Below the walls' top, each geom's hull (clipped at the top's plane: its vertices
+        below it and the points where its edges cross it) must lie inside the inner walls; a
+        convex body lies inside the convex inner prism exactly when those points do. Every
+        vertex must lie above the floor. Each geom's bounding box is tested first, the same
+        way: the box encloses the hull, so its distance is a lower bound of the hull's, and a
+        geom whose box is at least ``exact_below`` from the bin keeps the box's distance.
 
         Args:
             R_BG: Tool orientations in B, (n, 3, 3).
             p_BG: Tool positions in B [m], (n, 3).
             width: Finger gap [m].
             bin_: The bin.
+            exact_below: Where a geom's box is nearer than this, its hull's distance [m]
+                (default: everywhere).
 
         Returns:
             Per pose the smallest distance [m] (negative: into a wall or the floor), the geom
             index (into the hand's geoms) and the point in B [m], shapes (n,), (n,), (n, 3).
         """
-        P_G = self.corners_G(width)  # (k, 8, 3)
-        P = np.einsum("nij,kcj->nkci", R_BG, P_G) + p_BG[:, None, None, :]  # (n, k, 8, 3)
         floor_z = float(bin_.to_bin_frame(bin_.center_W)[2])
         top_z = floor_z + bin_.wall_top_z - bin_.floor_top_z
-        z = P[..., 2]
-        A, Bp = P[:, :, _BOX_EDGES[:, 0]], P[:, :, _BOX_EDGES[:, 1]]  # (n, k, 12, 3)
-        za, zb = A[..., 2] - top_z, Bp[..., 2] - top_z
-        crossing = za * zb < 0.0
-        t = np.where(crossing, za / np.where(crossing, za - zb, 1.0), 0.0)
-        pts = np.concatenate([P, A + t[..., None] * (Bp - A)], axis=2)  # (n, k, 20, 3)
-        below = np.concatenate([z < top_z, crossing], axis=2)
         half = bin_.inner_half_extents
-        wall = (half - np.abs(pts[..., :2])).min(axis=-1)
-        gap = np.where(below, wall, np.inf)
-        floor = z - floor_z
-        gap[..., :8] = np.minimum(gap[..., :8], floor)
-        n = len(R_BG)
-        flat = gap.reshape(n, -1)
-        idx = np.argmin(flat, axis=1)
+        boxes = self.corners_G(width)  # (k, 8, 3)
+        n, k = len(R_BG), len(boxes)
+        # Every geom's box at once: its 8 corners and 12 edges, one body per geom.
+        corners = boxes.reshape(-1, 3)
+        edges = (_BOX_EDGES[None] + 8 * np.arange(k)[:, None, None]).reshape(-1, 2)
+        gap, pts = _clipped_gaps(R_BG, p_BG, corners, edges, top_z, floor_z, half)
+        # Regrouped per geom: its 8 corners, then its 12 edges' crossings, (n, k, 20).
+        gap = np.concatenate(
+            [gap[:, : 8 * k].reshape(n, k, 8), gap[:, 8 * k :].reshape(n, k, 12)], axis=2
+        )
+        pts = np.concatenate(
+            [pts[:, : 8 * k].reshape(n, k, 8, 3), pts[:, 8 * k :].reshape(n, k, 12, 3)], axis=2
+        )
+        at = np.argmin(gap, axis=2)
+        per_geom = np.take_along_axis(gap, at[..., None], axis=2)[..., 0]  # (n, k)
+        points = np.take_along_axis(pts, at[..., None, None], axis=2)[:, :, 0]  # (n, k, 3)
+        hulls = self.hull_G(width)
+        for j in self._hull_tighter:
+            rows = np.flatnonzero(per_geom[:, j] < exact_below)
+            if len(rows):
+                lo, hi = self._hull_span[j]
+                g, q = _clipped_gaps(
+                    R_BG[rows],
+                    p_BG[rows],
+                    hulls[lo:hi],
+                    self._hull_edges_local[j],
+                    top_z,
+                    floor_z,
+                    half,
+                )
+                i = np.argmin(g, axis=1)
+                per_geom[rows, j] = g[np.arange(len(rows)), i]
+                points[rows, j] = q[np.arange(len(rows)), i]
+        which = np.argmin(per_geom, axis=1)
         rows = np.arange(n)
-        k, c = np.unravel_index(idx, gap.shape[1:])
-        return flat[rows, idx], k, pts[rows, k, c]
+        return per_geom[rows, which], which, points[rows, which]
 
     def problem(
         self, X_WG: SE3, width: float, bin_: BinGeometry, clearance: float

@@ -8,9 +8,9 @@ by tests that need no IK, in this order:
 
 1. reach: the tool at the pick and the place within the arm's reach (the sum of its link
    lengths from the first joint's anchor);
-2. the open hand's footprint: its collision boxes at the pick (opened to the grasp's width) and at
-   the place (opened to the whole opening the release ramps to) inside the bin's
-   inner walls and above its floor by the pre-flight's clearance
+2. the open hand's footprint: its collision geoms' convex hulls at the pick (opened to the
+   grasp's width) and at the place (opened to the whole opening the release ramps to) inside
+   the bin's inner walls and above its floor by the pre-flight's clearance
    (:class:`~pickplace.planning.candidates.HandFootprint`);
 3. the wrist's margin: the last joint's angle at the pick and after the transfer, predicted from
    the tool's yaw changes (:meth:`PickPlacePlanner.rank`), at least
@@ -408,7 +408,8 @@ class Ranked:
         grasp: The candidate.
         problem: The first cheap test it fails (reach or footprint), or None.
         clearance: The open hand's smallest distance to the bins at the pick and the place
-            [m].
+            [m]: exact below the pre-flight's clearance, else a lower bound (a geom's
+            bounding box where that clears the bins by the clearance).
         wrist_margin: Predicted distance of the last joint from its limits [rad] (inf for a
             last joint without limits).
         wrist_travel: Predicted turn of the last joint, home to pick plus the transfer [rad].
@@ -865,7 +866,11 @@ class PickPlacePlanner:
                     continue  # on the ground: the pre-flight checks the hand there
                 R_BW, p_BW = self._bin_frames[bin_.name]
                 d, _, _ = self.hand.distances(
-                    np.einsum("ij,njk->nik", R_BW, R[sel]), p[sel] @ R_BW.T + p_BW, w, bin_
+                    np.einsum("ij,njk->nik", R_BW, R[sel]),
+                    p[sel] @ R_BW.T + p_BW,
+                    w,
+                    bin_,
+                    exact_below=clearance,  # pass or fail exact; a passing one's at least
                 )
                 near[sel] = np.minimum(near[sel], d)
         # The wrist: the tool's yaw changes, less what the base swing carries along, are the
