@@ -523,12 +523,19 @@ class HandFootprint:
         """Corners of every geom's bounding box in G with the fingers at gap ``width`` [m],
         (k, 8, 3)."""
         cached = self._corners.get(width)
-        if cached is None:
-            aabb = self.model.geom_aabb[self.geom_ids]  # (k, 6): centre, half sizes
-            local = aabb[:, None, :3] + _CORNER_SIGNS[None] * aabb[:, None, 3:]  # (k, 8, 3)
-            cached = np.stack(self._to_G(width, list(local)))
-            self._corners[width] = cached
-        return cached
+        if cached is not None:
+            return cached
+        m, d = self.model, self.pose(width)
+        R_WG = d.site_xmat[self.tool_site_id].reshape(3, 3)
+        p_WG = d.site_xpos[self.tool_site_id]
+        g = self.geom_ids
+        aabb = m.geom_aabb[g]  # (k, 6): centre and half sizes in the geom frame
+        local = aabb[:, None, :3] + _CORNER_SIGNS[None] * aabb[:, None, 3:]  # (k, 8, 3)
+        R_Wg = d.geom_xmat[g].reshape(-1, 3, 3)
+        p_W = np.einsum("kij,knj->kni", R_Wg, local) + d.geom_xpos[g][:, None, :]
+        corners = (p_W - p_WG) @ R_WG  # R_WGᵀ (p_W − p_WG), row-wise
+        self._corners[width] = corners
+        return corners
 
     def hull_G(self, width: float) -> np.ndarray:
         """Every geom's hull vertices in G with the fingers at gap ``width`` [m], (n, 3)
