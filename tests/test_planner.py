@@ -22,7 +22,12 @@ from pickplace.planning.candidates import (
     gravity_torque,
 )
 from pickplace.planning.plan import PlanConfig, plan_pick_place
-from pickplace.planning.planner import REFUSAL_CAUSES, PickPlacePlanner
+from pickplace.planning.planner import (
+    FOOTPRINT_MARGIN,
+    REFUSAL_CAUSES,
+    WRIST_MARGIN,
+    PickPlacePlanner,
+)
 from pickplace.planning.preflight import PreflightConfig
 from pickplace.robot.calibration import MIN_PAD_CLEARANCE, PAD_CLEARANCE
 from pickplace.run.runner import RunRequest, prepare
@@ -167,6 +172,45 @@ def test_the_open_hand_s_footprint_is_the_distance_of_its_hulls_to_the_walls(
     found = hand.problem(X_WG, width, bin_, 0.005)
     assert found is not None and found.where == "bin1's +y wall"
     assert found.distance == pytest.approx(0.001, abs=1e-12)
+
+
+@pytest.mark.parametrize("robot", ["iiwa14-wsg50", "panda-hand"])
+def test_a_hand_close_to_the_walls_ranks_after_those_with_room(robot: str) -> None:
+    """Near bin 1's -y wall, the candidates passing the cheap tests are ranked with those whose
+    open hand clears the walls by less than the clearance plus FOOTPRINT_MARGIN after the
+    others of the same wrist class, pad clearance and tilt; the flag agrees with the exact
+    hull distance at the pick."""
+    scene = load_scene(robot=robot)
+    planner = PickPlacePlanner(scene, "qp")
+    clearance = planner.preflight.config.clearance
+    for y_B in (-0.05, -0.06, -0.07, -0.08, -0.09):  # the first with both kinds
+        X_pick, X_place = _poses(scene, 0.0, y_B, 0.0)
+        passing = [r for r in planner.rank(X_pick, X_place) if r.problem is None]
+        if any(r.close_to_bins for r in passing) and any(not r.close_to_bins for r in passing):
+            break
+    else:
+        pytest.fail("no pose 50-90 mm off bin 1's centre has passing candidates of both kinds")
+    classes = [
+        (
+            r.wrist_margin < WRIST_MARGIN,
+            r.grasp.open_width - r.grasp.width < 2.0 * PAD_CLEARANCE - 1e-12,
+            round(abs(r.grasp.tilt), 9),
+            r.close_to_bins,
+        )
+        for r in passing
+    ]
+    assert classes == sorted(classes)
+    for r in passing:
+        X_WG = X_pick @ r.grasp.X_OG
+        bin_ = scene.source_bin
+        R_BG = bin_.X_WB.inverse().rotation().as_matrix() @ X_WG.rotation().as_matrix()
+        p_BG = bin_.to_bin_frame(X_WG.translation())
+        walls, _, _ = planner.hand.distances(
+            R_BG[None], p_BG[None], r.grasp.open_width, bin_, floor=False
+        )
+        if walls[0] < clearance + FOOTPRINT_MARGIN:  # close at the pick (maybe at the place)
+            assert r.close_to_bins
+        assert r.clearance >= clearance
 
 
 def test_near_a_wall_the_length_grasp_is_chosen(scene: Scene) -> None:

@@ -401,14 +401,15 @@ def _clipped_gaps(
     P_G: np.ndarray,
     edges: np.ndarray,
     top_z: float,
-    floor_z: float,
+    floor_z: float | None,
     half: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One convex body (vertices ``P_G`` in G [m], ``edges`` joining them) at ``n`` tool poses
     in a bin's frame: its part below the walls' top ``top_z`` (the vertices below it and the
     points where the edges cross it) against the inner walls (half sizes ``half``), its
-    vertices against the floor at ``floor_z``: per pose and point the distance [m] (inf for
-    a crossing that is not one) and the point in B [m], shapes (n, v + m), (n, v + m, 3)."""
+    vertices against the floor at ``floor_z`` (None: the walls alone): per pose and point the
+    distance [m] (inf for a crossing that is not one) and the point in B [m], shapes
+    (n, v + m), (n, v + m, 3)."""
     P = P_G @ R_BG.transpose(0, 2, 1) + p_BG[:, None, :]  # (n, v, 3)
     z = P[..., 2]
     A, Bp = P[:, edges[:, 0]], P[:, edges[:, 1]]  # (n, m, 3)
@@ -418,8 +419,9 @@ def _clipped_gaps(
     pts = np.concatenate([P, A + t[..., None] * (Bp - A)], axis=1)  # (n, v + m, 3)
     below = np.concatenate([z < top_z, crossing], axis=1)
     gap = np.where(below, (half - np.abs(pts[..., :2])).min(axis=-1), np.inf)
-    v = len(P_G)
-    gap[:, :v] = np.minimum(gap[:, :v], z - floor_z)
+    if floor_z is not None:
+        v = len(P_G)
+        gap[:, :v] = np.minimum(gap[:, :v], z - floor_z)
     return gap, pts
 
 
@@ -553,6 +555,7 @@ class HandFootprint:
         width: float,
         bin_: BinGeometry,
         exact_below: float = math.inf,
+        floor: bool = True,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The open hand at ``n`` tool poses in a bin's frame B: each pose's smallest distance
         to the bin's floor or inner walls [m].
@@ -571,6 +574,7 @@ class HandFootprint:
             bin_: The bin.
             exact_below: Where a geom's box is nearer than this, its hull's distance [m]
                 (default: everywhere).
+            floor: Whether the floor counts (False: the inner walls alone).
 
         Returns:
             Per pose the smallest distance [m] (negative: into a wall or the floor), the geom
@@ -579,12 +583,13 @@ class HandFootprint:
         floor_z = float(bin_.to_bin_frame(bin_.center_W)[2])
         top_z = floor_z + bin_.wall_top_z - bin_.floor_top_z
         half = bin_.inner_half_extents
+        below: float | None = floor_z if floor else None
         boxes = self.corners_G(width)  # (k, 8, 3)
         n, k = len(R_BG), len(boxes)
         # Every geom's box at once: its 8 corners and 12 edges, one body per geom.
         corners = boxes.reshape(-1, 3)
         edges = (_BOX_EDGES[None] + 8 * np.arange(k)[:, None, None]).reshape(-1, 2)
-        gap, pts = _clipped_gaps(R_BG, p_BG, corners, edges, top_z, floor_z, half)
+        gap, pts = _clipped_gaps(R_BG, p_BG, corners, edges, top_z, below, half)
         # Regrouped per geom: its 8 corners, then its 12 edges' crossings, (n, k, 20).
         gap = np.concatenate(
             [gap[:, : 8 * k].reshape(n, k, 8), gap[:, 8 * k :].reshape(n, k, 12)], axis=2
@@ -606,7 +611,7 @@ class HandFootprint:
                     hulls[lo:hi],
                     self._hull_edges_local[j],
                     top_z,
-                    floor_z,
+                    below,
                     half,
                 )
                 i = np.argmin(g, axis=1)

@@ -19,14 +19,15 @@ by tests that need no IK, in this order:
 A candidate failing 1 or 2 is not pre-flighted; one failing 3 is ranked after those that pass.
 Among the passing, those with the whole pad clearance a side first (a grasp the gripper opens
 to only with less, :data:`~pickplace.robot.calibration.MIN_PAD_CLEARANCE` at least, after
-them), then the smaller tilt, then the smaller torque of the weight about the pads
-(:func:`~pickplace.planning.candidates.gravity_torque`), then the shorter pendulum (the centre
-of mass's distance from the pad axis), then the narrower width, then the
-smaller wrist travel (the nearest yaw, as every plan chose before candidates existed). The best
-:data:`MAX_PREFLIGHTS` are pre-flighted with the run's own controller
-(:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is taken. If
-none is, the report says so, with each pre-flighted candidate's first problem; if none passed
-1 and 2, with the best-ranked candidate's cheap-test problem.
+them), then the smaller tilt, then the open hand's room (one clearing the bins' walls by less
+than the clearance plus :data:`FOOTPRINT_MARGIN` after those with more), then the smaller
+torque of the weight about the pads (:func:`~pickplace.planning.candidates.gravity_torque`),
+then the shorter pendulum (the centre of mass's distance from the pad axis), then the
+narrower width, then the smaller wrist travel (the nearest yaw, as every plan chose before
+candidates existed). The best :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own
+controller (:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is
+taken. If none is, the report says so, with each pre-flighted candidate's first problem; if
+none passed 1 and 2, with the best-ranked candidate's cheap-test problem.
 
 A plan starts at the home posture unless given a :class:`Start` (the configuration and tool
 pose where the arm stopped, when a run tries again: :mod:`pickplace.sim.recovery`); its
@@ -152,6 +153,12 @@ WRIST_MARGIN = 0.3
 """Predicted distance of the last joint from its limits below which a candidate is ranked
 after those above it [rad]: the prediction counts the last joint alone, and the pre-flight
 measured the others sharing the turn, or the path overshooting it, by up to about 0.2 rad."""
+
+
+FOOTPRINT_MARGIN = 0.003
+"""Open-hand clearance beyond the pre-flight's below which a candidate is ranked after those
+clearing the bins by more [m]: lifting the brick, the IK drifts 1.5–3 mm sideways, and the
+physical arm lags its command by a few millimetres more."""
 
 
 PLANNERS = ("cartesian", "c-space")
@@ -417,6 +424,9 @@ class Ranked:
         arm: Distance of the object's centre of mass from the pad axis [m]: the pendulum an
             acceleration of the hand swings it on (pads on a curved side touch it along a
             line, which resists no turn about that axis).
+        close_to_bins: The open hand clears the bins' walls by less than the pre-flight's
+            clearance plus :data:`FOOTPRINT_MARGIN` (the floor, which the pads' height sets,
+            not a sideways drift, counts only for the clearance).
     """
 
     grasp: GraspCandidate
@@ -426,6 +436,7 @@ class Ranked:
     wrist_travel: float
     torque: float
     arm: float
+    close_to_bins: bool = False
 
     @property
     def cheap_test(self) -> str | None:
@@ -444,6 +455,7 @@ class Ranked:
             self.wrist_margin < WRIST_MARGIN,
             self.grasp.open_width - self.grasp.width < 2.0 * PAD_CLEARANCE - 1e-12,
             abs(self.grasp.tilt),
+            self.close_to_bins,
             round(self.torque, 9),
             round(self.arm, 9),
             round(self.grasp.width, 9),
@@ -853,8 +865,10 @@ class PickPlacePlanner:
             np.linalg.norm(p_pick - self.p_W_shoulder, axis=1),
             np.linalg.norm(p_place - self.p_W_shoulder, axis=1),
         )
-        # The open hand in each bin, per open width.
+        # The open hand in each bin, per open width: against the walls and the floor, and
+        # against the walls alone for the room beyond the clearance (FOOTPRINT_MARGIN).
         near = np.full(n, np.inf)
+        near_walls = np.full(n, np.inf)
         # The hand opens to the grasp's width at the pick, to the whole opening at the release.
         for width in np.unique(open_widths):
             sel = open_widths == width
@@ -865,14 +879,13 @@ class PickPlacePlanner:
                 if bin_ is None:
                     continue  # on the ground: the pre-flight checks the hand there
                 R_BW, p_BW = self._bin_frames[bin_.name]
-                d, _, _ = self.hand.distances(
-                    np.einsum("ij,njk->nik", R_BW, R[sel]),
-                    p[sel] @ R_BW.T + p_BW,
-                    w,
-                    bin_,
-                    exact_below=clearance,  # pass or fail exact; a passing one's at least
-                )
+                R_BG, p_BG = np.einsum("ij,njk->nik", R_BW, R[sel]), p[sel] @ R_BW.T + p_BW
+                d, _, _ = self.hand.distances(R_BG, p_BG, w, bin_, exact_below=clearance)
                 near[sel] = np.minimum(near[sel], d)
+                d, _, _ = self.hand.distances(
+                    R_BG, p_BG, w, bin_, exact_below=clearance + FOOTPRINT_MARGIN, floor=False
+                )
+                near_walls[sel] = np.minimum(near_walls[sel], d)
         # The wrist: the tool's yaw changes, less what the base swing carries along, are the
         # last joint's turns over its axis' vertical component: from home to the pick (the
         # first motion slerps the tool's orientation the shorter way round, so its yaw turns
@@ -918,6 +931,7 @@ class PickPlacePlanner:
                     float(travel[i]),
                     float(torque[i]),
                     float(candidates.arms[i]),
+                    bool(near_walls[i] < clearance + FOOTPRINT_MARGIN),
                 )
             )
         out.sort(key=Ranked.key)
