@@ -25,20 +25,23 @@ from pickplace.planning.plan import PlanConfig, plan_pick_place
 from pickplace.planning.planner import (
     FOOTPRINT_MARGIN,
     REFUSAL_CAUSES,
+    SAME_APPROACH,
     WRIST_MARGIN,
     PickPlacePlanner,
 )
 from pickplace.planning.preflight import PreflightConfig
 from pickplace.robot.calibration import MIN_PAD_CLEARANCE, PAD_CLEARANCE
-from pickplace.run.runner import RunRequest, prepare
+from pickplace.run.runner import RunRequest, build_task, prepare
 from pickplace.sim.checks import FailureReason
 from pickplace.sim.loader import load_scene
+from pickplace.sim.scenarios import BuildRequest
 from pickplace.sim.task import World
 from pickplace.world.placements import (
     BrickPlacement,
     brick_on_floor,
     nominal_placement,
     target_placement,
+    uniform_placement,
 )
 from pickplace.world.scene import Scene
 from tests.conftest import CliRun, finished
@@ -211,6 +214,36 @@ def test_a_hand_close_to_the_walls_ranks_after_those_with_room(robot: str) -> No
         if walls[0] < clearance + FOOTPRINT_MARGIN:  # close at the pick (maybe at the place)
             assert r.close_to_bins
         assert r.clearance >= clearance
+
+
+def test_after_a_singularity_the_same_approach_is_not_pre_flighted_again() -> None:
+    """The Menagerie UR5e reaching for the jar at bin 1's far side: the vertical approach meets
+    a singularity, and the next candidate pre-flighted approaches along another axis (every
+    closing direction and wrist turn of the vertical approach would meet it again), which is
+    feasible."""
+    scene, _ = build_task(
+        RunRequest(scenario="pick-place-uniform", robot="menagerie-ur5e-2f85", object="jar"),
+        refuse_infeasible=False,
+    )
+    placement = uniform_placement(scene, np.random.default_rng(98054))
+    X_pick = brick_on_floor(scene, placement, scene.source_bin.floor_top_z)
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    planner = BuildRequest(scene, "pick-place-uniform", 98054).planner()
+    report = planner.plan(X_pick, X_place)
+    by_label = {g.label: g for g in planner.grasps()}
+    axes = [
+        X_pick.rotation().as_matrix() @ by_label[c.label].X_OG.rotation().as_matrix()[:, 2]
+        for c in report.candidates
+    ]
+    kinds = [
+        None if c.preflight.problem is None else c.preflight.problem.kind for c in report.candidates
+    ]
+    assert "singularity" in kinds
+    for i, kind in enumerate(kinds):
+        if kind == "singularity":
+            for later in axes[i + 1 :]:
+                assert float(later @ axes[i]) < math.cos(SAME_APPROACH)
+    assert report.feasible
 
 
 def test_near_a_wall_the_length_grasp_is_chosen(scene: Scene) -> None:

@@ -26,8 +26,10 @@ then the shorter pendulum (the centre of mass's distance from the pad axis), the
 narrower width, then the smaller wrist travel (the nearest yaw, as every plan chose before
 candidates existed). The best :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own
 controller (:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is
-taken. If none is, the report says so, with each pre-flighted candidate's first problem; if
-none passed 1 and 2, with the best-ranked candidate's cheap-test problem.
+taken; after one fails near a singularity, the candidates of the same approach axis are passed
+over (:data:`SAME_APPROACH`). If none is, the report says so, with each pre-flighted
+candidate's first problem; if none passed 1 and 2, with the best-ranked candidate's cheap-test
+problem.
 
 A plan starts at the home posture unless given a :class:`Start` (the configuration and tool
 pose where the arm stopped, when a run tries again: :mod:`pickplace.sim.recovery`); its
@@ -149,6 +151,12 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 
 MAX_PREFLIGHTS = 4
 """Most candidates pre-flighted in one planning, best-ranked first."""
+SAME_APPROACH = math.radians(1.0)
+"""Angle between two candidates' approach axes (the tool's z in world at the pick) within
+which, once one failed its pre-flight near a singularity, the other is not pre-flighted
+[rad]: the tool Jacobian at a point on the last joint's axis does not depend on the turn about
+it, so grasps differing only by that turn (another closing direction of a vertical approach,
+the wrist turned, the pads a few millimetres off) meet the same singularity."""
 WRIST_MARGIN = 0.3
 """Predicted distance of the last joint from its limits below which a candidate is ranked
 after those above it [rad]: the prediction counts the last joint alone, and the pre-flight
@@ -670,12 +678,19 @@ class PickPlacePlanner:
         ranked = self.rank(X_WO_pick, X_WO_place, start, turn)
         tried: list[Candidate] = []
         chosen: int | None = None
-        for r in ranked[:MAX_PREFLIGHTS]:
-            if r.problem is not None:
+        singular: list[np.ndarray] = []  # approach axes that met a singularity
+        R_WO = X_WO_pick.rotation().as_matrix()
+        for r in ranked:
+            if r.problem is not None or len(tried) == MAX_PREFLIGHTS:
                 break
+            z_W = R_WO @ r.grasp.X_OG.rotation().as_matrix()[:, 2]
+            if any(float(z_W @ a) > math.cos(SAME_APPROACH) for a in singular):
+                continue  # the same approach as one that met a singularity
             stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
             plan, result, warning, attempt = self.planned(X_WO_pick, X_WO_place, r.grasp, start)
             tried.append(Candidate(r.grasp.label, plan, result, warning, attempt))
+            if result.problem is not None and result.problem.kind == "singularity":
+                singular.append(z_W)
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
                 if first_feasible:
