@@ -218,9 +218,9 @@ def test_a_hand_close_to_the_walls_ranks_after_those_with_room(robot: str) -> No
 
 def test_after_a_singularity_the_same_approach_is_not_pre_flighted_again() -> None:
     """The Menagerie UR5e reaching for the jar at bin 1's far side: the vertical approach meets
-    a singularity, and the next candidate pre-flighted approaches along another axis (every
-    closing direction and wrist turn of the vertical approach would meet it again), which is
-    feasible."""
+    a singularity with both wrist turns, and the next candidate pre-flighted approaches along
+    another axis (every closing direction of the vertical approach would meet it again), which
+    is feasible."""
     scene, _ = build_task(
         RunRequest(scenario="pick-place-uniform", robot="menagerie-ur5e-2f85", object="jar"),
         refuse_infeasible=False,
@@ -238,11 +238,14 @@ def test_after_a_singularity_the_same_approach_is_not_pre_flighted_again() -> No
     kinds = [
         None if c.preflight.problem is None else c.preflight.problem.kind for c in report.candidates
     ]
-    assert "singularity" in kinds
-    for i, kind in enumerate(kinds):
-        if kind == "singularity":
-            for later in axes[i + 1 :]:
-                assert float(later @ axes[i]) < math.cos(SAME_APPROACH)
+    assert kinds.count("singularity") >= 2
+    for i in range(len(axes)):
+        same = [
+            j
+            for j in range(i)
+            if kinds[j] == "singularity" and float(axes[j] @ axes[i]) > math.cos(SAME_APPROACH)
+        ]
+        assert len(same) < 2  # never a third try of an axis that met a singularity twice
     assert report.feasible
 
 

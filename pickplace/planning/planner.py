@@ -26,8 +26,8 @@ then the shorter pendulum (the centre of mass's distance from the pad axis), the
 narrower width, then the smaller wrist travel (the nearest yaw, as every plan chose before
 candidates existed). The best :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own
 controller (:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is
-taken; after one fails near a singularity, the candidates of the same approach axis are passed
-over (:data:`SAME_APPROACH`). If none is, the report says so, with each pre-flighted
+taken; after two of the same approach axis fail near a singularity, the others of that axis
+are passed over (:data:`SAME_APPROACH`). If none is, the report says so, with each pre-flighted
 candidate's first problem; if none passed 1 and 2, with the best-ranked candidate's cheap-test
 problem.
 
@@ -153,10 +153,13 @@ MAX_PREFLIGHTS = 4
 """Most candidates pre-flighted in one planning, best-ranked first."""
 SAME_APPROACH = math.radians(1.0)
 """Angle between two candidates' approach axes (the tool's z in world at the pick) within
-which, once one failed its pre-flight near a singularity, the other is not pre-flighted
-[rad]: the tool Jacobian at a point on the last joint's axis does not depend on the turn about
+which, once two have failed their pre-flights near a singularity, no other is pre-flighted
+[rad]. The tool Jacobian at a point on the last joint's axis does not depend on the turn about
 it, so grasps differing only by that turn (another closing direction of a vertical approach,
-the wrist turned, the pads a few millimetres off) meet the same singularity."""
+the wrist turned, the pads a few millimetres off) meet the same singularity where the arm's
+other joints take the same path; a redundant arm's path may differ with the turn (a Panda's
+transfer met σmin 0.016 with one wrist turn and 0.066 with the other), so one failure is not
+taken for the axis', two are."""
 WRIST_MARGIN = 0.3
 """Predicted distance of the last joint from its limits below which a candidate is ranked
 after those above it [rad]: the prediction counts the last joint alone, and the pre-flight
@@ -678,14 +681,14 @@ class PickPlacePlanner:
         ranked = self.rank(X_WO_pick, X_WO_place, start, turn)
         tried: list[Candidate] = []
         chosen: int | None = None
-        singular: list[np.ndarray] = []  # approach axes that met a singularity
+        singular: list[np.ndarray] = []  # approach axes of the candidates that met one
         R_WO = X_WO_pick.rotation().as_matrix()
         for r in ranked:
             if r.problem is not None or len(tried) == MAX_PREFLIGHTS:
                 break
             z_W = R_WO @ r.grasp.X_OG.rotation().as_matrix()[:, 2]
-            if any(float(z_W @ a) > math.cos(SAME_APPROACH) for a in singular):
-                continue  # the same approach as one that met a singularity
+            if sum(float(z_W @ a) > math.cos(SAME_APPROACH) for a in singular) >= 2:
+                continue  # an approach that met a singularity twice
             stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
             plan, result, warning, attempt = self.planned(X_WO_pick, X_WO_place, r.grasp, start)
             tried.append(Candidate(r.grasp.label, plan, result, warning, attempt))
