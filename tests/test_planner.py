@@ -208,8 +208,8 @@ def test_a_hand_close_to_the_walls_ranks_after_those_with_room(robot: str) -> No
         bin_ = scene.source_bin
         R_BG = bin_.X_WB.inverse().rotation().as_matrix() @ X_WG.rotation().as_matrix()
         p_BG = bin_.to_bin_frame(X_WG.translation())
-        walls, _, _ = planner.hand.distances(
-            R_BG[None], p_BG[None], r.grasp.open_width, bin_, floor=False
+        _, walls = planner.hand.clearances(
+            R_BG[None], p_BG[None], r.grasp.open_width, bin_, math.inf, math.inf
         )
         if walls[0] < clearance + FOOTPRINT_MARGIN:  # close at the pick (maybe at the place)
             assert r.close_to_bins

@@ -304,34 +304,32 @@ def _round_hull(
     latitude steps circumscribe the round surface, and the edges along and between them."""
     theta = 2.0 * math.pi * np.arange(sides) / sides
     ring = np.stack([np.cos(theta), np.sin(theta)], axis=1) / math.cos(math.pi / sides)
-    rings: list[tuple[float, float, float]] = []  # (radius, z) of each ring, and a pole flag
+    rings: list[tuple[float, float]] = []  # (radius, z) of each ring; radius 0: a pole
     if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
         r, h = float(size[0]), float(size[1])
-        rings = [(r, -h, 0.0), (r, h, 0.0)]
+        rings = [(r, -h), (r, h)]
     else:
         steps = sides // 2
         scale = 1.0 / math.cos(0.5 * math.pi / steps)
         lat = -0.5 * math.pi + math.pi * np.arange(1, steps) / steps
-        if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
-            r, h = float(size[0]), float(size[1])
-            # The lower hemisphere's rings about -h, the equator at both ends of the
-            # cylinder between them, the upper hemisphere's about +h.
-            low = [(r * scale * math.cos(a), -h + r * scale * math.sin(a), 0.0) for a in lat]
-            high = [(r * scale * math.cos(a), h + r * scale * math.sin(a), 0.0) for a in lat]
-            rings = [ring_ for ring_ in low if ring_[1] < -h - 1e-12]
-            rings += [(r * scale, -h, 0.0), (r * scale, h, 0.0)]
-            rings += [ring_ for ring_ in high if ring_[1] > h + 1e-12]
-            poles = (-h - r * scale, h + r * scale)
-        else:  # a sphere, or an ellipsoid: the unit sphere's polytope scaled per axis
-            for a in lat:
-                rings.append((scale * math.cos(a), scale * math.sin(a), 0.0))
-            poles = (-scale, scale)
-        rings = [(0.0, poles[0], 1.0), *rings, (0.0, poles[1], 1.0)]
+        # A capsule: the lower hemisphere's rings about -h, the equator at both ends of the
+        # cylinder between them, the upper hemisphere's about +h. A sphere or an ellipsoid:
+        # the unit sphere's (h = 0, r = 1), scaled per axis below.
+        r, h = (
+            (float(size[0]), float(size[1]))
+            if kind == mujoco.mjtGeom.mjGEOM_CAPSULE
+            else (1.0, 0.0)
+        )
+        R = r * scale
+        rings = [(R * math.cos(a), -h + R * math.sin(a)) for a in lat if a < 0.0]
+        rings += [(R, -h), (R, h)] if h > 0.0 else [(R, 0.0)]
+        rings += [(R * math.cos(a), h + R * math.sin(a)) for a in lat if a > 0.0]
+        rings = [(0.0, -h - R), *rings, (0.0, h + R)]
     vertices: list[np.ndarray] = []
     edges: list[tuple[int, int]] = []
     previous: list[int] = []
-    for radius, z, pole in rings:
-        if pole:
+    for radius, z in rings:
+        if radius == 0.0:
             ids = [len(vertices)]
             vertices.append(np.array([0.0, 0.0, z]))
         else:
@@ -401,15 +399,19 @@ def _clipped_gaps(
     P_G: np.ndarray,
     edges: np.ndarray,
     top_z: float,
-    floor_z: float | None,
+    floor_z: float,
     half: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One convex body (vertices ``P_G`` in G [m], ``edges`` joining them) at ``n`` tool poses
     in a bin's frame: its part below the walls' top ``top_z`` (the vertices below it and the
-    points where the edges cross it) against the inner walls (half sizes ``half``), its
-    vertices against the floor at ``floor_z`` (None: the walls alone): per pose and point the
-    distance [m] (inf for a crossing that is not one) and the point in B [m], shapes
-    (n, v + m), (n, v + m, 3)."""
+    points where the edges cross it) against the inner walls (half sizes ``half``), and its
+    vertices against the floor at ``floor_z``.
+
+    Returns:
+        Per pose and point the distance to the walls [m] (inf for a point above the top, or
+        a crossing that is not one), (n, v + m); per pose and vertex the height above the
+        floor [m], (n, v); the points in B [m], (n, v + m, 3).
+    """
     P = P_G @ R_BG.transpose(0, 2, 1) + p_BG[:, None, :]  # (n, v, 3)
     z = P[..., 2]
     A, Bp = P[:, edges[:, 0]], P[:, edges[:, 1]]  # (n, m, 3)
@@ -418,11 +420,17 @@ def _clipped_gaps(
     t = np.where(crossing, za / np.where(crossing, za - zb, 1.0), 0.0)
     pts = np.concatenate([P, A + t[..., None] * (Bp - A)], axis=1)  # (n, v + m, 3)
     below = np.concatenate([z < top_z, crossing], axis=1)
-    gap = np.where(below, (half - np.abs(pts[..., :2])).min(axis=-1), np.inf)
-    if floor_z is not None:
-        v = len(P_G)
-        gap[:, :v] = np.minimum(gap[:, :v], z - floor_z)
-    return gap, pts
+    walls = np.where(below, (half - np.abs(pts[..., :2])).min(axis=-1), np.inf)
+    return walls, z - floor_z, pts
+
+
+def _with_floor(walls: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """Walls' distances (…, v + m) with the vertices' (the first v) floor heights (…, v)
+    taken in: the distance to the bin."""
+    out = walls.copy()
+    v = floor.shape[-1]
+    out[..., :v] = np.minimum(out[..., :v], floor)
+    return out
 
 
 @dataclass(frozen=True)
@@ -483,22 +491,19 @@ class HandFootprint:
         adr, q = q_arm
         self.data.qpos[adr] = q
         self._corners: dict[float, np.ndarray] = {}
-        self._hulls: dict[float, np.ndarray] = {}
+        self._hulls: dict[float, list[np.ndarray]] = {}
         self._posed: float | None = None
         hulls = [hull_of(model, int(g)) for g in self.geom_ids]
-        counts = np.array([len(v) for v, _ in hulls], dtype=np.intp)
-        ends = np.cumsum(counts)
         self._hull_local = [v for v, _ in hulls]
-        self._hull_edges_local = [e for _, e in hulls]
-        self._hull_span = [(int(b - c), int(b)) for b, c in zip(ends, counts, strict=True)]
-        self.hull_geom = np.repeat(np.arange(len(hulls), dtype=np.intp), counts)
+        self._hull_edges = [e for _, e in hulls]
+        self.hull_geom = np.repeat(np.arange(len(hulls), dtype=np.intp), [len(v) for v, _ in hulls])
+        """The hand geom (an index into :attr:`geom_ids`) of each vertex of :meth:`hull_G`."""
         # The geoms whose hull is tighter than their bounding box (all but boxes).
         self._hull_tighter = [
             j
             for j, g in enumerate(self.geom_ids)
             if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_BOX
         ]
-        """The hand geom (an index into :attr:`geom_ids`) of each vertex of :meth:`hull_G`."""
 
     def pose(self, width: float) -> mujoco.MjData:
         """:attr:`data` with the fingers at gap ``width`` [m] and its kinematics computed
@@ -527,6 +532,9 @@ class HandFootprint:
         cached = self._corners.get(width)
         if cached is not None:
             return cached
+        # Batched, not through _to_G: its matrix product rounds the last bit differently, and
+        # the pads' corners give the grasps' offsets, whose labels round at whole millimetres
+        # (pick-place-random seed 8's golden reads +7 mm, not +8).
         m, d = self.model, self.pose(width)
         R_WG = d.site_xmat[self.tool_site_id].reshape(3, 3)
         p_WG = d.site_xpos[self.tool_site_id]
@@ -539,14 +547,18 @@ class HandFootprint:
         self._corners[width] = corners
         return corners
 
+    def _hulls_G(self, width: float) -> list[np.ndarray]:
+        """Each geom's hull vertices in G with the fingers at gap ``width`` [m]."""
+        cached = self._hulls.get(width)
+        if cached is None:
+            cached = self._to_G(width, self._hull_local)
+            self._hulls[width] = cached
+        return cached
+
     def hull_G(self, width: float) -> np.ndarray:
         """Every geom's hull vertices in G with the fingers at gap ``width`` [m], (n, 3)
         (:attr:`hull_geom` says whose)."""
-        cached = self._hulls.get(width)
-        if cached is None:
-            cached = np.concatenate(self._to_G(width, self._hull_local))
-            self._hulls[width] = cached
-        return cached
+        return np.concatenate(self._hulls_G(width))
 
     def distances(
         self,
@@ -555,7 +567,6 @@ class HandFootprint:
         width: float,
         bin_: BinGeometry,
         exact_below: float = math.inf,
-        floor: bool = True,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The open hand at ``n`` tool poses in a bin's frame B: each pose's smallest distance
         to the bin's floor or inner walls [m].
@@ -574,52 +585,83 @@ class HandFootprint:
             bin_: The bin.
             exact_below: Where a geom's box is nearer than this, its hull's distance [m]
                 (default: everywhere).
-            floor: Whether the floor counts (False: the inner walls alone).
 
         Returns:
             Per pose the smallest distance [m] (negative: into a wall or the floor), the geom
             index (into the hand's geoms) and the point in B [m], shapes (n,), (n,), (n, 3).
         """
+        to_bin, _, points = self._per_geom(R_BG, p_BG, width, bin_, exact_below, -math.inf)
+        which = np.argmin(to_bin, axis=1)
+        rows = np.arange(len(R_BG))
+        return to_bin[rows, which], which, points[rows, which]
+
+    def clearances(
+        self,
+        R_BG: np.ndarray,
+        p_BG: np.ndarray,
+        width: float,
+        bin_: BinGeometry,
+        exact_below: float,
+        walls_exact_below: float,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Each pose's smallest distance to the bin (as :meth:`distances`) and to its inner
+        walls alone [m], both from one pass, shapes (n,), (n,); each exact where a geom's box
+        is nearer than ``exact_below`` (the bin), respectively ``walls_exact_below`` (the
+        walls), else that box's distance."""
+        to_bin, to_walls, _ = self._per_geom(
+            R_BG, p_BG, width, bin_, exact_below, walls_exact_below
+        )
+        return to_bin.min(axis=1), to_walls.min(axis=1)
+
+    def _per_geom(
+        self,
+        R_BG: np.ndarray,
+        p_BG: np.ndarray,
+        width: float,
+        bin_: BinGeometry,
+        exact_below: float,
+        walls_exact_below: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per pose and geom the distance to the bin and to its walls alone [m], (n, k) each,
+        and the point of the former in B [m], (n, k, 3) (:meth:`distances`, :meth:`clearances`:
+        a geom's hull where its box is nearer than the thresholds, else its box)."""
         floor_z = float(bin_.to_bin_frame(bin_.center_W)[2])
         top_z = floor_z + bin_.wall_top_z - bin_.floor_top_z
         half = bin_.inner_half_extents
-        below: float | None = floor_z if floor else None
         boxes = self.corners_G(width)  # (k, 8, 3)
         n, k = len(R_BG), len(boxes)
         # Every geom's box at once: its 8 corners and 12 edges, one body per geom.
         corners = boxes.reshape(-1, 3)
         edges = (_BOX_EDGES[None] + 8 * np.arange(k)[:, None, None]).reshape(-1, 2)
-        gap, pts = _clipped_gaps(R_BG, p_BG, corners, edges, top_z, below, half)
+        walls, floor, pts = _clipped_gaps(R_BG, p_BG, corners, edges, top_z, floor_z, half)
         # Regrouped per geom: its 8 corners, then its 12 edges' crossings, (n, k, 20).
-        gap = np.concatenate(
-            [gap[:, : 8 * k].reshape(n, k, 8), gap[:, 8 * k :].reshape(n, k, 12)], axis=2
+        walls = np.concatenate(
+            [walls[:, : 8 * k].reshape(n, k, 8), walls[:, 8 * k :].reshape(n, k, 12)], axis=2
         )
         pts = np.concatenate(
             [pts[:, : 8 * k].reshape(n, k, 8, 3), pts[:, 8 * k :].reshape(n, k, 12, 3)], axis=2
         )
-        at = np.argmin(gap, axis=2)
-        per_geom = np.take_along_axis(gap, at[..., None], axis=2)[..., 0]  # (n, k)
+        to_bin = _with_floor(walls, floor.reshape(n, k, 8))
+        at = np.argmin(to_bin, axis=2)
         points = np.take_along_axis(pts, at[..., None, None], axis=2)[:, :, 0]  # (n, k, 3)
-        hulls = self.hull_G(width)
+        to_bin = np.take_along_axis(to_bin, at[..., None], axis=2)[..., 0]  # (n, k)
+        to_walls = walls.min(axis=2)  # (n, k)
+        hulls = self._hulls_G(width)
         for j in self._hull_tighter:
-            rows = np.flatnonzero(per_geom[:, j] < exact_below)
+            bin_near = to_bin[:, j] < exact_below
+            walls_near = to_walls[:, j] < walls_exact_below
+            rows = np.flatnonzero(bin_near | walls_near)
             if len(rows):
-                lo, hi = self._hull_span[j]
-                g, q = _clipped_gaps(
-                    R_BG[rows],
-                    p_BG[rows],
-                    hulls[lo:hi],
-                    self._hull_edges_local[j],
-                    top_z,
-                    below,
-                    half,
+                w, f, q = _clipped_gaps(
+                    R_BG[rows], p_BG[rows], hulls[j], self._hull_edges[j], top_z, floor_z, half
                 )
+                g = _with_floor(w, f)
                 i = np.argmin(g, axis=1)
-                per_geom[rows, j] = g[np.arange(len(rows)), i]
-                points[rows, j] = q[np.arange(len(rows)), i]
-        which = np.argmin(per_geom, axis=1)
-        rows = np.arange(n)
-        return per_geom[rows, which], which, points[rows, which]
+                r = np.arange(len(rows))
+                b, ws = bin_near[rows], walls_near[rows]
+                to_bin[rows[b], j], points[rows[b], j] = g[r, i][b], q[r, i][b]
+                to_walls[rows[ws], j] = w.min(axis=1)[ws]
+        return to_bin, to_walls, points
 
     def problem(
         self, X_WG: SE3, width: float, bin_: BinGeometry, clearance: float

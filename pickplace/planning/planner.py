@@ -897,13 +897,16 @@ class PickPlacePlanner:
                 if bin_ is None:
                     continue  # on the ground: the pre-flight checks the hand there
                 R_BW, p_BW = self._bin_frames[bin_.name]
-                R_BG, p_BG = np.einsum("ij,njk->nik", R_BW, R[sel]), p[sel] @ R_BW.T + p_BW
-                d, _, _ = self.hand.distances(R_BG, p_BG, w, bin_, exact_below=clearance)
-                near[sel] = np.minimum(near[sel], d)
-                d, _, _ = self.hand.distances(
-                    R_BG, p_BG, w, bin_, exact_below=clearance + FOOTPRINT_MARGIN, floor=False
+                to_bin, to_walls = self.hand.clearances(
+                    np.einsum("ij,njk->nik", R_BW, R[sel]),
+                    p[sel] @ R_BW.T + p_BW,
+                    w,
+                    bin_,
+                    exact_below=clearance,
+                    walls_exact_below=clearance + FOOTPRINT_MARGIN,
                 )
-                near_walls[sel] = np.minimum(near_walls[sel], d)
+                near[sel] = np.minimum(near[sel], to_bin)
+                near_walls[sel] = np.minimum(near_walls[sel], to_walls)
         # The wrist: the tool's yaw changes, less what the base swing carries along, are the
         # last joint's turns over its axis' vertical component: from home to the pick (the
         # first motion slerps the tool's orientation the shorter way round, so its yaw turns
