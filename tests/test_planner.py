@@ -266,13 +266,13 @@ def test_near_a_wall_the_length_grasp_is_chosen(scene: Scene) -> None:
 
 
 def test_a_brick_resting_against_a_wall_is_picked(scene: Scene) -> None:
-    """3 mm from bin 1's -y wall, within the 5 mm clearance where it lies: that pair is not a
-    clearance violation (it leaves straight up), and the brick is picked."""
+    """3 mm from bin 1's -y wall, within the 5 mm clearance where it lies: that pair counts in
+    the transport only, not as it leaves straight up, and the brick is picked."""
     half = scene.source_bin.inner_half_extents
     X_pick, X_place = _poses(scene, 0.0, -(float(half[1]) - 0.025 - 0.003), 0.0)
     planner = PickPlacePlanner(scene, "qp")
     kinds = planner.preflight.pair_kinds(X_pick, X_place)
-    assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_ny").id] == 0
+    assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_ny").id] == 3
     assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_py").id] == 2
     report = planner.plan(X_pick, X_place)
     assert report.feasible, report.problems()

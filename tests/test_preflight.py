@@ -157,28 +157,70 @@ def test_a_palm_over_a_wall_is_refused_and_the_run_would_have_hit_it(scene: Scen
     assert result.failure is not None and result.failure.value == "collision"
 
 
-def test_the_held_brick_is_checked_and_its_supports_are_not(scene: Scene) -> None:
+def test_the_held_brick_is_checked_and_what_it_lies_beside_only_in_the_transport(
+    scene: Scene,
+) -> None:
     """Resting on bin 1's floor at the start and bin 2's at the goal is no problem; a held brick
-    2 mm from a wall is, and the pair named is the brick and that wall."""
+    2 mm from a wall is, and the pair named is the brick and that wall. A wall the brick lies
+    12 mm from at its start (within the clearance plus the tracking tolerance) counts in the
+    transport but not in the vertical lift from beside it."""
     planner = PickPlacePlanner(scene, "qp")
     X_pick, X_place = _poses(scene, _bin1(scene, 0.0, 0.0, 0.0))
     assert planner.plan(X_pick, X_place).feasible
-    pf = planner.preflight
+    pf, cfg = planner.preflight, planner.preflight.config
     kinds = pf.pair_kinds(X_pick, X_place)
     brick = scene.brick_geom_id
     for floor in ("bin1_floor", "bin2_floor"):
-        assert kinds[brick, scene.model.geom(floor).id] == 0  # it rests there
+        assert kinds[brick, scene.model.geom(floor).id] == 3  # it rests there
     wall = scene.model.geom("bin1_wall_px").id
     assert kinds[brick, wall] == 2
     # The brick held 2 mm from bin 1's +x wall, the arm at home: the brick is the problem.
     half = scene.source_bin.inner_half_extents
     near = _bin1(scene, float(half[0]) - 0.0375 - 0.002, 0.0, 0.0)
     X_near = brick_on_floor(scene, near, scene.source_bin.floor_top_z + 0.03)
-    clearance, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds, held=True)
-    assert pair is not None and pair[:2] == ("brick", "bin1_wall_px")
-    assert clearance == pytest.approx(0.002, abs=1e-6)
+    for vertical in (False, True):  # the wall is not beside its start: it counts in the lift
+        clearance, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds, True, vertical)
+        assert pair is not None and pair[:2] == ("brick", "bin1_wall_px")
+        assert clearance == pytest.approx(0.002, abs=1e-6)
     _, pair_free = pf._closest(scene.robot.q_home, 0.1, X_near, kinds, held=False)
     assert pair_free is None or pair_free[0] != "brick"
+    # Lying 12 mm from that wall, it lies beside it.
+    beside = _bin1(scene, float(half[0]) - 0.0375 - 0.012, 0.0, 0.0)
+    X_beside = brick_on_floor(scene, beside, scene.source_bin.floor_top_z)
+    assert cfg.clearance < 0.012 < cfg.clearance + cfg.tracking_tolerance
+    kinds_beside = pf.pair_kinds(X_beside, X_place)
+    assert kinds_beside[brick, wall] == 3
+    _, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds_beside, True, vertical=True)
+    assert pair is None or pair[:2] != ("brick", "bin1_wall_px")
+    clearance, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds_beside, True)
+    assert pair is not None and pair[:2] == ("brick", "bin1_wall_px")
+    assert clearance == pytest.approx(0.002, abs=1e-6)
+
+
+def test_a_brick_lying_just_beyond_the_clearance_of_a_wall_is_lifted_from_beside_it(
+    scene: Scene,
+) -> None:
+    """A uniform pose (seed 98617) 5.2 mm from bin 1's +y wall: the lift's drift off the plan
+    (the IK trading the tool's pose against its posture) took the brick 0.1 mm nearer than
+    the clearance, and every candidate was refused; lifted straight up beside the wall, it is
+    planned."""
+    from pickplace.world.placements import uniform_placement
+
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick, X_place = _poses(scene, uniform_placement(scene, np.random.default_rng(98617)))
+    cfg = planner.preflight.config
+    gap = float(scene.source_bin.inner_half_extents[1]) - float(
+        scene.source_bin.to_bin_frame(X_pick.translation())[1]
+    )
+    lying = gap - float(scene.object.footprint_half(_yaw_in_bin(scene, X_pick))[1])
+    assert cfg.clearance < lying < cfg.clearance + cfg.tracking_tolerance
+    assert planner.plan(X_pick, X_place).feasible
+
+
+def _yaw_in_bin(scene: Scene, X_WO: SE3) -> float:
+    """The brick's yaw in bin 1's frame [rad]."""
+    R_BO = scene.source_bin.X_WB.inverse().rotation().as_matrix() @ X_WO.rotation().as_matrix()
+    return math.atan2(R_BO[1, 0], R_BO[0, 0])
 
 
 def test_a_wrist_wound_into_its_limit_is_refused(scene: Scene) -> None:

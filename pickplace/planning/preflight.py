@@ -15,10 +15,13 @@ predicts the commanded joint path, up to the coarser rate the pre-flight runs at
    the brick while it is held, against every world geom (bins, floor, obstacles), at least
    :attr:`PreflightConfig.clearance` apart. MuJoCo's own collision detection (``mj_collision``
    with geom margins) runs on a kinematic copy of the scene's model; the robot never collides
-   with the brick there (the grasp is the physics' job), and the held brick ignores the geoms
-   it rests against at its start and goal poses: those within the clearance of it there (the
-   floor under it, a wall beside it), which the plan leaves and reaches along straight
-   vertical moves (lift, place).
+   with the brick there (the grasp is the physics' job). The plan leaves the brick's start
+   and reaches its goal along straight vertical moves (the lift, the place's descent): there
+   the held brick ignores the geoms it lies beside at that pose, those within the clearance
+   plus :attr:`PreflightConfig.tracking_tolerance` of it (the floor under it, a wall beside
+   it), since moving straight up or down it comes no nearer to them than by the IK's drift
+   off the plan, which the tracking check bounds. In the transport between them every pair
+   counts.
 
 The first problem found ends the pre-flight; a plan without problems is feasible, and its
 margins over the whole plan are reported.
@@ -101,7 +104,8 @@ class PreflightConfig:
     midpoint_feedforward: bool = True
 
     def __post_init__(self) -> None:
-        """Validate every field (all must be finite numbers > 0)."""
+        """Validate every field (all must be finite numbers > 0, and the detection distance
+        beyond the clearance plus the tracking tolerance: what the brick lies beside)."""
         for name in (
             "rate_hz",
             "clearance",
@@ -112,6 +116,12 @@ class PreflightConfig:
             "min_singular_value",
         ):
             require_positive(f"pre-flight {name}", getattr(self, name))
+        beside = self.clearance + self.tracking_tolerance
+        if not self.detection_distance > beside:
+            raise PlanError(
+                f"pre-flight detection_distance must exceed clearance + tracking_tolerance "
+                f"({beside} m), got {self.detection_distance} m"
+            )
 
 
 @dataclass(frozen=True)
@@ -251,6 +261,7 @@ class Preflight:
         X_GO = plan.X_OG.inverse() if plan.X_OG is not None else None
         width_held = grasp_width(plan, sc)
         held = (phases.grip_closed, phases.release) if phases and X_GO is not None else None
+        transport = phases.transport if phases is not None else (-math.inf, math.inf)
         # From the pick on, the brick is between the fingers: they close onto it, no further.
         on_brick = (phases.approach[1], phases.release) if held is not None and phases else None
         X_WO_end = X_WO_goal if X_WO_goal is not None else X_WO_start
@@ -286,12 +297,14 @@ class Preflight:
             res = command(q, x, V)
             q_path[i], qdot_path[i], J_path[i] = q, res.qdot, res.J_WG
             is_held = held is not None and held[0] <= t < held[1]
+            # Held in the lift or the place's descent, not the transport between them.
+            vertical = is_held and not transport[0] <= t <= transport[1]
             X_WO = X_WO_start if held is None or t < held[0] else X_WO_end
             if is_held and X_GO is not None:
                 X_WO = SE3(res.x_WG) @ X_GO
             if on_brick is not None and on_brick[0] <= t < on_brick[1]:
                 width = max(width, width_held)
-            clearance, contact = self._closest(q, width, X_WO, pair_kind, is_held)
+            clearance, contact = self._closest(q, width, X_WO, pair_kind, is_held, vertical)
             clear_path[i] = clearance
             if found is None:
                 found = self._tick_problem(t, x, res, clearance, contact, tracking_sq)
@@ -474,9 +487,10 @@ class Preflight:
         mujoco.mj_collision(m, d)
 
     def pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
-        """Per geom pair: 1 robot-world, 2 brick-world (not a geom it rests against at the
-        start or the end: within the clearance of it there), 0 not checked; shape
-        (ngeom, ngeom), symmetric."""
+        """Per geom pair: 1 robot-world, 2 brick-world, 3 brick-world with a geom the brick
+        lies beside at the start or the end (within the clearance plus the tracking tolerance
+        of it there: counted in the transport only, see the module docstring), 0 not checked;
+        shape (ngeom, ngeom), symmetric."""
         ng, sc = self.model.ngeom, self.scene
         robot, world = self._robot, self._world
         kinds = np.zeros((ng, ng), dtype=np.int8)
@@ -490,10 +504,10 @@ class Preflight:
             self._load(sc.robot.q_home, 0.0, X_WO)
             d, n = self.data, self.data.ncon
             g1, g2 = d.contact.geom1[:n], d.contact.geom2[:n]
-            near = d.contact.dist[:n] < self.config.clearance
+            near = d.contact.dist[:n] < self.config.clearance + self.config.tracking_tolerance
             for a, b in zip(g1[near].tolist(), g2[near].tolist(), strict=True):
                 if a in held_set or b in held_set:
-                    kinds[a, b] = kinds[b, a] = 0  # the brick rests against it
+                    kinds[a, b] = kinds[b, a] = 3  # the brick lies beside it
         return kinds
 
     def clearance(
@@ -513,9 +527,17 @@ class Preflight:
         return self._closest(q, width, X_WO, pair_kind, held)
 
     def _closest(
-        self, q: np.ndarray, width: float, X_WO: SE3, pair_kind: np.ndarray, held: bool
+        self,
+        q: np.ndarray,
+        width: float,
+        X_WO: SE3,
+        pair_kind: np.ndarray,
+        held: bool,
+        vertical: bool = False,
     ) -> tuple[float, tuple[str, str, tuple[float, float, float]] | None]:
-        """Smallest robot-world (and, if ``held``, brick-world) distance, its pair and point."""
+        """Smallest robot-world (and, if ``held``, brick-world) distance, its pair and point;
+        ``vertical``: held in the lift or the place's descent, where the geoms the brick lies
+        beside at its start and goal do not count (:meth:`pair_kinds`)."""
         self._load(q, width, X_WO)
         d, sc = self.data, self.scene
         n = d.ncon
@@ -524,7 +546,12 @@ class Preflight:
         contact = d.contact
         g1, g2 = contact.geom1[:n], contact.geom2[:n]
         kinds = pair_kind[g1, g2]
-        mask = kinds > 0 if held else kinds == 1
+        if not held:
+            mask = kinds == 1
+        elif vertical:
+            mask = (kinds == 1) | (kinds == 2)
+        else:
+            mask = kinds > 0
         if not mask.any():
             return self.config.detection_distance, None
         dist = contact.dist[:n]
