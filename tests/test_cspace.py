@@ -126,6 +126,31 @@ def test_the_divider_blocks_the_cartesian_transfer_and_the_cspace_one_passes() -
     assert d["motions"] and d["c_space"]["found"]
 
 
+def test_a_transfer_through_a_singularity_is_planned_in_cspace_instead() -> None:
+    """panda-hand, a uniform pose on bin 1's far side (seed 98670): the Cartesian transfer
+    takes the wrist to σmin 0.016 (the pre-flight's floor is 0.02) with every candidate; a
+    joint-space path between the same lift and pre-place configurations keeps σmin above
+    the floor, and the plan is feasible."""
+    from pickplace.world.placements import uniform_placement
+
+    scene = load_scene(robot="panda-hand")
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick = brick_on_floor(
+        scene, uniform_placement(scene, np.random.default_rng(98670)), scene.source_bin.floor_top_z
+    )
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    report = planner.plan(X_pick, X_place)
+    assert report.feasible
+    chosen = report.candidates[report.chosen or 0]
+    assert chosen.cspace is not None
+    assert chosen.cspace.cartesian_problem.kind == "singularity"
+    assert {(m.start, m.end): m.planner for m in chosen.motions()}[("lift", "pre-place")] == (
+        "c-space"
+    )
+    floor = planner.preflight.config.min_singular_value
+    assert chosen.preflight.min_singular_value >= floor
+
+
 def test_the_cspace_path_keeps_the_clearance_with_the_held_brick_everywhere() -> None:
     """Checked independently of the planner's own check: half its step along the spline."""
     planner, report = divided_report()

@@ -40,7 +40,9 @@ Every candidate's clearance via-point turns with the base swing (``via="swing"``
 :func:`pickplace.planning.plan.plan_pick_place`).
 
 When a candidate's path sweep collides in the transfer (after the lift, up to the pre-place),
-the transfer is planned again in joint space (:mod:`pickplace.planning.cspace`: RRT-Connect,
+or passes near a singularity there (the straight line and the via-point's swing can take a
+wrist through one that a joint-space path between the same configurations avoids), the
+transfer is planned again in joint space (:mod:`pickplace.planning.cspace`: RRT-Connect,
 shortcutting, a smooth spline, collision-checked by the pre-flight's own check at its
 clearance) from the IK's joint positions at the lift to those at the pre-place, both refined to
 the keyframes' poses exactly; the lift and the pre-place then stop, the via-point is dropped,
@@ -219,10 +221,11 @@ class Motion:
 
 @dataclass(frozen=True)
 class CSpaceAttempt:
-    """A candidate's transfer planned in C-space (because its Cartesian transfer collided).
+    """A candidate's transfer planned in C-space (because its Cartesian transfer collided or
+    met a singularity).
 
     Attributes:
-        cartesian_problem: The Cartesian transfer's collision.
+        cartesian_problem: The Cartesian transfer's collision or singularity.
         result: What the C-space planning found (path, problem, time, checks).
     """
 
@@ -1127,8 +1130,8 @@ class PickPlacePlanner:
         self, X_WO_pick: SE3, X_WO_place: SE3, grasp: GraspCandidate, start: Start | None = None
     ) -> tuple[Plan, PreflightResult, str | None, CSpaceAttempt | None]:
         """One candidate as :meth:`timed_plan` plans it (from ``start``, default home), and,
-        when its path sweep collides in the transfer, with the transfer planned in C-space
-        instead (:meth:`cspace_plan`).
+        when its path sweep collides or meets a singularity in the transfer, with the transfer
+        planned in C-space instead (:meth:`cspace_plan`).
 
         Returns:
             The plan, its pre-flight, the timing's warning and the C-space attempt (None when
@@ -1139,7 +1142,7 @@ class PickPlacePlanner:
         problem, phases = result.problem, plan.phases
         if (
             problem is None
-            or problem.kind != "collision"
+            or problem.kind not in ("collision", "singularity")
             or phases is None
             or not phases.transport[0] < problem.t <= phases.transport[1]
             or any(law is not None for law in plan.trajectory.laws)  # the timed plan's
@@ -1161,8 +1164,9 @@ class PickPlacePlanner:
         Args:
             X_WO_pick: Brick pose to pick, in world.
             X_WO_place: Goal pose of the brick.
-            path: The candidate's swept Cartesian plan, whose transfer collides.
-            swept: Its path sweep's pre-flight, with that collision.
+            path: The candidate's swept Cartesian plan, whose transfer collides or meets a
+                singularity.
+            swept: Its path sweep's pre-flight, with that problem.
             start: Where the plan starts (default: home).
         """
         q_start = None if start is None else start.q
