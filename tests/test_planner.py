@@ -272,7 +272,7 @@ def test_a_brick_resting_against_a_wall_is_picked(scene: Scene) -> None:
     X_pick, X_place = _poses(scene, 0.0, -(float(half[1]) - 0.025 - 0.003), 0.0)
     planner = PickPlacePlanner(scene, "qp")
     kinds = planner.preflight.pair_kinds(X_pick, X_place)
-    assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_ny").id] == 3
+    assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_ny").id] == 4
     assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_py").id] == 2
     report = planner.plan(X_pick, X_place)
     assert report.feasible, report.problems()

@@ -162,8 +162,9 @@ def test_the_held_brick_is_checked_and_what_it_lies_beside_only_in_the_transport
 ) -> None:
     """Resting on bin 1's floor at the start and bin 2's at the goal is no problem; a held brick
     2 mm from a wall is, and the pair named is the brick and that wall. A wall the brick lies
-    12 mm from at its start (within the clearance plus the tracking tolerance) counts in the
-    transport but not in the vertical lift from beside it."""
+    12 mm from at its start (within the clearance plus the tracking tolerance) is a problem in
+    the transport but not in the vertical lift from beside it, where its distance is still
+    reported."""
     planner = PickPlacePlanner(scene, "qp")
     X_pick, X_place = _poses(scene, _bin1(scene, 0.0, 0.0, 0.0))
     assert planner.plan(X_pick, X_place).feasible
@@ -171,18 +172,19 @@ def test_the_held_brick_is_checked_and_what_it_lies_beside_only_in_the_transport
     kinds = pf.pair_kinds(X_pick, X_place)
     brick = scene.brick_geom_id
     for floor in ("bin1_floor", "bin2_floor"):
-        assert kinds[brick, scene.model.geom(floor).id] == 3  # it rests there
+        assert kinds[brick, scene.model.geom(floor).id] == 4  # it rests there
     wall = scene.model.geom("bin1_wall_px").id
     assert kinds[brick, wall] == 2
     # The brick held 2 mm from bin 1's +x wall, the arm at home: the brick is the problem.
     half = scene.source_bin.inner_half_extents
     near = _bin1(scene, float(half[0]) - 0.0375 - 0.002, 0.0, 0.0)
     X_near = brick_on_floor(scene, near, scene.source_bin.floor_top_z + 0.03)
+    q_home = scene.robot.q_home
     for vertical in (False, True):  # the wall is not beside its start: it counts in the lift
-        clearance, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds, True, vertical)
+        clearance, pair, nearest = pf._closest(q_home, 0.1, X_near, kinds, True, vertical)
         assert pair is not None and pair[:2] == ("brick", "bin1_wall_px")
-        assert clearance == pytest.approx(0.002, abs=1e-6)
-    _, pair_free = pf._closest(scene.robot.q_home, 0.1, X_near, kinds, held=False)
+        assert clearance == pytest.approx(0.002, abs=1e-6) and nearest == clearance
+    _, pair_free, _ = pf._closest(q_home, 0.1, X_near, kinds, held=False)
     assert pair_free is None or pair_free[0] != "brick"
     # Lying 12 mm from that wall, it lies beside it.
     beside = _bin1(scene, float(half[0]) - 0.0375 - 0.012, 0.0, 0.0)
@@ -190,9 +192,10 @@ def test_the_held_brick_is_checked_and_what_it_lies_beside_only_in_the_transport
     assert cfg.clearance < 0.012 < cfg.clearance + cfg.tracking_tolerance
     kinds_beside = pf.pair_kinds(X_beside, X_place)
     assert kinds_beside[brick, wall] == 3
-    _, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds_beside, True, vertical=True)
+    _, pair, nearest = pf._closest(q_home, 0.1, X_near, kinds_beside, True, vertical=True)
     assert pair is None or pair[:2] != ("brick", "bin1_wall_px")
-    clearance, pair = pf._closest(scene.robot.q_home, 0.1, X_near, kinds_beside, True)
+    assert nearest == pytest.approx(0.002, abs=1e-6)  # reported, not a problem
+    clearance, pair, _ = pf._closest(q_home, 0.1, X_near, kinds_beside, True)
     assert pair is not None and pair[:2] == ("brick", "bin1_wall_px")
     assert clearance == pytest.approx(0.002, abs=1e-6)
 
@@ -270,7 +273,7 @@ def test_the_fingers_close_onto_the_brick_no_further(
     widths: list[float] = []
     closest = pf._closest
 
-    def spy(q: np.ndarray, width: float, *rest: object) -> tuple[float, object]:
+    def spy(q: np.ndarray, width: float, *rest: object) -> tuple[float, object, float]:
         widths.append(width)
         return closest(q, width, *rest)  # type: ignore[arg-type]
 

@@ -20,8 +20,9 @@ predicts the commanded joint path, up to the coarser rate the pre-flight runs at
    the held brick ignores the geoms it lies beside at that pose, those within the clearance
    plus :attr:`PreflightConfig.tracking_tolerance` of it (the floor under it, a wall beside
    it), since moving straight up or down it comes no nearer to them than by the IK's drift
-   off the plan, which the tracking check bounds. In the transport between them every pair
-   counts.
+   off the plan, which the tracking check bounds. The reported minimum clearance still
+   counts the walls it lies beside there (not what it rests against: within the clearance,
+   the floor under it). In the transport between them every pair counts.
 
 The first problem found ends the pre-flight; a plan without problems is feasible, and its
 margins over the whole plan are reported.
@@ -304,8 +305,10 @@ class Preflight:
                 X_WO = SE3(res.x_WG) @ X_GO
             if on_brick is not None and on_brick[0] <= t < on_brick[1]:
                 width = max(width, width_held)
-            clearance, contact = self._closest(q, width, X_WO, pair_kind, is_held, vertical)
-            clear_path[i] = clearance
+            clearance, contact, nearest = self._closest(
+                q, width, X_WO, pair_kind, is_held, vertical
+            )
+            clear_path[i] = nearest
             if found is None:
                 found = self._tick_problem(t, x, res, clearance, contact, tracking_sq)
                 if found is not None and stop_at_problem:
@@ -489,8 +492,9 @@ class Preflight:
     def pair_kinds(self, X_WO_start: SE3, X_WO_end: SE3) -> np.ndarray:
         """Per geom pair: 1 robot-world, 2 brick-world, 3 brick-world with a geom the brick
         lies beside at the start or the end (within the clearance plus the tracking tolerance
-        of it there: counted in the transport only, see the module docstring), 0 not checked;
-        shape (ngeom, ngeom), symmetric."""
+        of it there: a problem in the transport only, see the module docstring), 4 one it
+        rests against there (within the clearance: the floor under it; in the transport
+        only), 0 not checked; shape (ngeom, ngeom), symmetric."""
         ng, sc = self.model.ngeom, self.scene
         robot, world = self._robot, self._world
         kinds = np.zeros((ng, ng), dtype=np.int8)
@@ -504,10 +508,12 @@ class Preflight:
             self._load(sc.robot.q_home, 0.0, X_WO)
             d, n = self.data, self.data.ncon
             g1, g2 = d.contact.geom1[:n], d.contact.geom2[:n]
-            near = d.contact.dist[:n] < self.config.clearance + self.config.tracking_tolerance
-            for a, b in zip(g1[near].tolist(), g2[near].tolist(), strict=True):
+            dist = d.contact.dist[:n]
+            near = dist < self.config.clearance + self.config.tracking_tolerance
+            for a, b, gap in zip(g1[near].tolist(), g2[near].tolist(), dist[near], strict=True):
                 if a in held_set or b in held_set:
-                    kinds[a, b] = kinds[b, a] = 3  # the brick lies beside it
+                    kind = 4 if gap < self.config.clearance else 3  # rests against, beside
+                    kinds[a, b] = kinds[b, a] = max(kinds[a, b], kind)
         return kinds
 
     def clearance(
@@ -524,7 +530,7 @@ class Preflight:
             pair_kind: Which pairs count (:meth:`pair_kinds`).
             held: Whether the brick is held (its pairs count too).
         """
-        return self._closest(q, width, X_WO, pair_kind, held)
+        return self._closest(q, width, X_WO, pair_kind, held)[:2]
 
     def _closest(
         self,
@@ -534,36 +540,46 @@ class Preflight:
         pair_kind: np.ndarray,
         held: bool,
         vertical: bool = False,
-    ) -> tuple[float, tuple[str, str, tuple[float, float, float]] | None]:
-        """Smallest robot-world (and, if ``held``, brick-world) distance, its pair and point;
+    ) -> tuple[float, tuple[str, str, tuple[float, float, float]] | None, float]:
+        """Smallest robot-world (and, if ``held``, brick-world) distance, its pair and point,
+        and the smallest distance to report (:attr:`PreflightResult.min_clearance`).
+
         ``vertical``: held in the lift or the place's descent, where the geoms the brick lies
-        beside at its start and goal do not count (:meth:`pair_kinds`)."""
+        beside at its start and goal (kind 3 of :meth:`pair_kinds`) are reported but are no
+        problem, and those it rests against (kind 4) neither.
+        """
         self._load(q, width, X_WO)
         d, sc = self.data, self.scene
         n = d.ncon
+        far = self.config.detection_distance
         if n == 0:
-            return self.config.detection_distance, None
+            return far, None, far
         contact = d.contact
         g1, g2 = contact.geom1[:n], contact.geom2[:n]
         kinds = pair_kind[g1, g2]
-        if not held:
-            mask = kinds == 1
-        elif vertical:
-            mask = (kinds == 1) | (kinds == 2)
-        else:
-            mask = kinds > 0
-        if not mask.any():
-            return self.config.detection_distance, None
         dist = contact.dist[:n]
+        if not held:
+            mask = report = kinds == 1
+        elif vertical:
+            mask, report = (kinds == 1) | (kinds == 2), (kinds >= 1) & (kinds <= 3)
+        else:
+            mask = report = kinds > 0
+        nearest = float(dist[report].min()) if report.any() else far
+        if not mask.any():
+            return far, None, nearest
         k = int(np.flatnonzero(mask)[np.argmin(dist[mask])])
         a, b = int(g1[k]), int(g2[k])
         if self._world[a]:
             a, b = b, a
         pos = contact.pos[k]
-        return float(dist[k]), (
-            sc.geom_name(a),
-            sc.geom_name(b),
-            (float(pos[0]), float(pos[1]), float(pos[2])),
+        return (
+            float(dist[k]),
+            (
+                sc.geom_name(a),
+                sc.geom_name(b),
+                (float(pos[0]), float(pos[1]), float(pos[2])),
+            ),
+            nearest,
         )
 
 
