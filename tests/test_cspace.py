@@ -151,6 +151,27 @@ def test_a_transfer_through_a_singularity_is_planned_in_cspace_instead() -> None
     assert chosen.preflight.min_singular_value >= floor
 
 
+@pytest.mark.slow
+def test_a_cspace_transfer_whose_timing_stalls_is_that_candidate_s_problem() -> None:
+    """menagerie-panda-hand, the can at uniform seed 98023: the first candidate's singular
+    transfer, planned in C-space, leaves a lift no speed within the limits can time (it
+    raised out of the planner and lost the sweep's trial); it is that candidate's
+    ``speed-limit`` problem, and the next candidate plans."""
+    from pickplace.run.runner import RunRequest, plan_report
+
+    report = plan_report(
+        RunRequest(
+            scenario="pick-place-uniform", robot="menagerie-panda-hand", object="can", seed=98023
+        )
+    )
+    first = report.candidates[0]
+    assert first.cspace is not None and first.cspace.cartesian_problem.kind == "singularity"
+    assert first.preflight.problem is not None
+    assert first.preflight.problem.kind == "speed-limit"
+    assert "stalls" in first.preflight.problem.text
+    assert report.feasible and report.chosen is not None and report.chosen > 0
+
+
 def test_the_cspace_path_keeps_the_clearance_with_the_held_brick_everywhere() -> None:
     """Checked independently of the planner's own check: half its step along the spline."""
     planner, report = divided_report()

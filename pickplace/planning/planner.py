@@ -151,8 +151,13 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-MAX_PREFLIGHTS = 4
-"""Most candidates pre-flighted in one planning, best-ranked first."""
+MAX_PREFLIGHTS = 8
+"""Most candidates pre-flighted in one planning, best-ranked first. Eight, not four: on
+uniform poses where the best four fail (the wrist at a limit, the palm or the forearm at a
+wall, a singular transfer), a fifth to seventh candidate (another face pair, the wrist's
+other turn) planned 3 of 12 refused panda-hand poses and 4 of 26 menagerie-panda-hand ones
+(seeds 98600-98899; all 7 succeeded in the physics). Only plans whose first candidates fail
+pay for it: a refusal pre-flights up to twice as many."""
 SAME_APPROACH = math.radians(1.0)
 """Angle between two candidates' approach axes (the tool's z in world at the pick) within
 which, once two have failed their pre-flights near a singularity, no other is pre-flighted
@@ -764,8 +769,7 @@ class PickPlacePlanner:
         problem, phases = swept.problem, path.phases
         assert phases is not None
         if swept.feasible:
-            plan, warning = self.retimed(path, swept.times, swept.q)
-            result = self.preflight.run(plan, X_WO_held, X_WO_place, q_start=start.q)
+            plan, result, warning = self._timed(path, swept, X_WO_held, X_WO_place, start.q)
         elif (
             problem is not None and problem.kind == "collision" and problem.t <= phases.transport[1]
         ):
@@ -1116,6 +1120,19 @@ class PickPlacePlanner:
             )
         if not swept.feasible:
             return path, swept, None
+        return self._timed(path, swept, X_WO_pick, X_WO_place, q_start)
+
+    def _timed(
+        self,
+        path: Plan,
+        swept: PreflightResult,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        q_start: np.ndarray | None,
+    ) -> tuple[Plan, PreflightResult, str | None]:
+        """The feasible swept ``path`` timed by the robot's limits and pre-flighted as timed,
+        with the timing's warning; a path whose timing stalls (a stretch admits no speed
+        within the limits) is the candidate's ``speed-limit`` problem, on the swept plan."""
         try:
             timed, warning = self.retimed(path, swept.times, swept.q)
         except TimingStallError as exc:  # this path has no timing: the candidate's problem
@@ -1224,9 +1241,7 @@ class PickPlacePlanner:
         swept = self.preflight.run(swept_plan, X_WO_pick, X_WO_place, q_start=q_start)
         if not swept.feasible:
             return swept_plan, swept, None, attempt
-        timed, warning = self.retimed(swept_plan, swept.times, swept.q)
-        final = self.preflight.run(timed, X_WO_pick, X_WO_place, q_start=q_start)
-        return timed, final, warning, attempt
+        return (*self._timed(swept_plan, swept, X_WO_pick, X_WO_place, q_start), attempt)
 
     def _exact(self, q: np.ndarray, X_WG: SE3, iterations: int = 20) -> np.ndarray:
         """``q`` moved (least-norm Gauss-Newton steps) until the tool is at ``X_WG`` [rad]."""
