@@ -7,6 +7,7 @@ from functools import cache
 
 import numpy as np
 import pytest
+from mink.lie import SE3
 
 from pickplace.control.kinematics import ArmKinematics
 from pickplace.geometry import rotation_vector_W
@@ -253,6 +254,42 @@ def test_a_start_in_collision_is_refused_naming_the_pair() -> None:
     assert result.path is None and result.problem is not None
     assert "start" in result.problem and "arm/link4" in result.problem
     assert "cell_box1" in result.problem
+
+
+@pytest.mark.parametrize("start", [np.array([3.0, 0.0]), np.array([np.nan, 0.0])])
+def test_an_end_outside_the_search_bounds_is_refused_before_any_check(start: np.ndarray) -> None:
+    """A start outside the bounds (or not a number) would leave RRT-Connect nothing to grow
+    from until the wall-time bound ends it: it is the problem at once, no check made."""
+    calls: list[np.ndarray] = []
+
+    def check(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
+        calls.append(q)
+        return 1.0, None
+
+    result = plan_joint_path(
+        check, start, np.ones(2), -np.ones(2), 2 * np.ones(2), np.ones(2), 0.005, 1
+    )
+    assert result.path is None and result.problem is not None
+    assert "start (the lift) lies outside the search's joint bounds: joint 0" in result.problem
+    assert not calls and result.checks == 0
+
+
+def test_a_refinement_that_does_not_reach_its_pose_is_none() -> None:
+    """The C-space path's ends are refined to their keyframes' poses: exactly where the arm
+    reaches (the forward kinematics there is the pose), None for a pose 3 m away (the steps
+    run off instead of converging)."""
+    scene = load_scene()
+    planner = PickPlacePlanner(scene, "qp")
+    kin = ArmKinematics(scene)
+    q_home = scene.robot.q_home
+    kin.update(q_home + 0.05)
+    X_near = kin.X_WG()
+    q = planner._exact(q_home, X_near)
+    assert q is not None
+    kin.update(q)
+    np.testing.assert_allclose(kin.X_WG().translation(), X_near.translation(), atol=1e-9)
+    X_far = SE3.from_translation(np.array([3.0, 0.0, 0.5]))
+    assert planner._exact(q_home, X_far) is None
 
 
 def _wall(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:

@@ -299,8 +299,20 @@ def plan_joint_path(
         blockers[key] = blockers.get(key, 0) + 1
         return False
 
+    lo, hi = np.asarray(q_low), np.asarray(q_high)
     for what, q in (("start (the lift)", q_start), ("goal (the pre-place)", q_goal)):
-        d, contact = check(np.asarray(q, dtype=np.float64))
+        q = np.asarray(q, dtype=np.float64)
+        outside = np.flatnonzero(~((q >= lo) & (q <= hi)))  # NaN is outside too
+        if len(outside):
+            j = int(outside[0])
+            return CSpaceResult(
+                None,
+                f"the c-space path's {what} lies outside the search's joint bounds: joint {j} "
+                f"at {q[j]:.3f} rad, bounds [{lo[j]:.3f}, {hi[j]:.3f}] rad",
+                time.perf_counter() - t0,
+                counts["checks"],
+            )
+        d, contact = check(q)
         counts["checks"] += 1
         if d < clearance:
             return CSpaceResult(
@@ -342,7 +354,6 @@ def plan_joint_path(
             counts["checks"],
             ompl_s=ompl_s,
         )
-    lo, hi = np.asarray(q_low), np.asarray(q_high)
 
     def free(q: np.ndarray) -> bool:
         return bool(np.all(q >= lo) and np.all(q <= hi)) and clear(q)

@@ -173,6 +173,9 @@ after those above it [rad]: the prediction counts the last joint alone, and the 
 measured the others sharing the turn, or the path overshooting it, by up to about 0.2 rad."""
 
 
+EXACT_TOLERANCE = 1e-9
+"""Largest pose error [m, rad] of a C-space path's end refined to its keyframe's pose (the
+Gauss-Newton steps reach 1e-15 where they converge)."""
 FOOTPRINT_MARGIN = 0.003
 """Open-hand clearance beyond the pre-flight's below which a candidate is ranked after those
 clearing the bins by more [m]: lifting the brick, the IK drifts 1.5–3 mm sideways, and the
@@ -1206,6 +1209,19 @@ class PickPlacePlanner:
         )
         q_lift = self._exact(full.q[round(times[i_lift] / dt)], keyframes[i_lift].X_WG)
         q_pre = self._exact(full.q[round(times[i_pre] / dt)], keyframes[i_pre].X_WG)
+        if q_lift is None or q_pre is None:
+            what = "start (the lift)" if q_lift is None else "goal (the pre-place)"
+            result = CSpaceResult(
+                None,
+                f"the c-space path's {what}: the IK's configuration there does not refine to "
+                f"the keyframe's pose within the joint ranges (near a singularity)",
+                time.perf_counter() - t0,
+                0,
+            )
+            self._cspace_time += result.time_s
+            text = f"{problem.text}; {result.problem}"
+            attempt = CSpaceAttempt(problem, result)
+            return path, replace(swept, problem=replace(problem, text=text)), None, attempt
         X_GO = path.X_OG.inverse()
         width = grasp_width(path, sc)
         kinds = self.preflight.pair_kinds(X_WO_pick, X_WO_place)
@@ -1217,8 +1233,11 @@ class PickPlacePlanner:
 
         robot, margin = sc.robot, 2.0 * self.preflight.config.joint_margin
         around = np.minimum(q_lift, q_pre) - math.pi, np.maximum(q_lift, q_pre) + math.pi
-        low = np.where(robot.continuous, around[0], robot.q_min + margin)
-        high = np.where(robot.continuous, around[1], robot.q_max - margin)
+        # Within the ranges less twice the joint margin, widened to take in the two ends
+        # (the pre-flight keeps a joint one margin from its limit, not two).
+        ends = np.minimum(q_lift, q_pre), np.maximum(q_lift, q_pre)
+        low = np.where(robot.continuous, around[0], np.minimum(robot.q_min + margin, ends[0]))
+        high = np.where(robot.continuous, around[1], np.maximum(robot.q_max - margin, ends[1]))
         self._attempts += 1
         result = plan_joint_path(
             check,
@@ -1243,16 +1262,24 @@ class PickPlacePlanner:
             return swept_plan, swept, None, attempt
         return (*self._timed(swept_plan, swept, X_WO_pick, X_WO_place, q_start), attempt)
 
-    def _exact(self, q: np.ndarray, X_WG: SE3, iterations: int = 20) -> np.ndarray:
-        """``q`` moved (least-norm Gauss-Newton steps) until the tool is at ``X_WG`` [rad]."""
+    def _exact(self, q: np.ndarray, X_WG: SE3, iterations: int = 20) -> np.ndarray | None:
+        """``q`` moved (least-norm Gauss-Newton steps) until the tool is at ``X_WG`` [rad];
+        None when the steps do not get there (within :data:`EXACT_TOLERANCE`) inside the
+        joints' ranges: near a singularity they can run off by whole turns."""
         kin, target = self._kin, X_WG.wxyz_xyz.tolist()
         q = np.array(q, dtype=np.float64)
-        for _ in range(iterations):
+        error = math.inf
+        for _ in range(iterations + 1):
             kin.update(q)
             e = np.array(pose_error_W_floats(kin.wxyz_xyz_list(), target))
-            if float(np.abs(e).max()) < 1e-12:
+            error = float(np.abs(e).max())
+            if error < 1e-12:
                 break
             q = q + np.linalg.lstsq(kin.J_WG(), e, rcond=None)[0]
+        robot = self.scene.robot
+        inside = robot.continuous | ((q >= robot.q_min) & (q <= robot.q_max))
+        if not (error < EXACT_TOLERANCE and bool(np.all(inside))):
+            return None
         return q
 
     def _with_joint_transfer(
