@@ -1218,38 +1218,8 @@ class PickPlacePlanner:
                 time.perf_counter() - t0,
                 0,
             )
-            self._cspace_time += result.time_s
-            text = f"{problem.text}; {result.problem}"
-            attempt = CSpaceAttempt(problem, result)
-            return path, replace(swept, problem=replace(problem, text=text)), None, attempt
-        X_GO = path.X_OG.inverse()
-        width = grasp_width(path, sc)
-        kinds = self.preflight.pair_kinds(X_WO_pick, X_WO_place)
-        kin = ArmKinematics(sc)
-
-        def check(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
-            kin.update(q)
-            return self.preflight.clearance(q, width, kin.X_WG() @ X_GO, kinds, True)
-
-        robot, margin = sc.robot, 2.0 * self.preflight.config.joint_margin
-        around = np.minimum(q_lift, q_pre) - math.pi, np.maximum(q_lift, q_pre) + math.pi
-        # Within the ranges less twice the joint margin, widened to take in the two ends
-        # (the pre-flight keeps a joint one margin from its limit, not two).
-        ends = np.minimum(q_lift, q_pre), np.maximum(q_lift, q_pre)
-        low = np.where(robot.continuous, around[0], np.minimum(robot.q_min + margin, ends[0]))
-        high = np.where(robot.continuous, around[1], np.maximum(robot.q_max - margin, ends[1]))
-        self._attempts += 1
-        result = plan_joint_path(
-            check,
-            q_lift,
-            q_pre,
-            low,
-            high,
-            self.lever_arms,
-            self.preflight.config.clearance + self.cspace.extra_clearance,
-            (self.seed * 7919 + self._attempts) & 0x7FFFFFFF,
-            self.cspace,
-        )
+        else:
+            result = self._joint_path(path, X_WO_pick, X_WO_place, q_lift, q_pre)
         self._cspace_time += time.perf_counter() - t0
         attempt = CSpaceAttempt(problem, result)
         if result.path is None:
@@ -1261,6 +1231,52 @@ class PickPlacePlanner:
         if not swept.feasible:
             return swept_plan, swept, None, attempt
         return (*self._timed(swept_plan, swept, X_WO_pick, X_WO_place, q_start), attempt)
+
+    def _joint_path(
+        self,
+        path: Plan,
+        X_WO_pick: SE3,
+        X_WO_place: SE3,
+        q_lift: np.ndarray,
+        q_pre: np.ndarray,
+    ) -> CSpaceResult:
+        """OMPL's joint path from ``q_lift`` to ``q_pre`` [rad] with the held brick of
+        ``path``, collision-checked by the pre-flight's check at its clearance plus the
+        C-space's extra clearance (:meth:`cspace_plan`)."""
+        sc = self.scene
+        assert path.X_OG is not None  # a pick-and-place plan
+        X_GO = path.X_OG.inverse()
+        width = grasp_width(path, sc)
+        kinds = self.preflight.pair_kinds(X_WO_pick, X_WO_place)
+        kin = ArmKinematics(sc)
+
+        def check(q: np.ndarray) -> tuple[float, tuple[str, str, tuple[float, ...]] | None]:
+            kin.update(q)
+            return self.preflight.clearance(q, width, kin.X_WG() @ X_GO, kinds, True)
+
+        robot, margin = sc.robot, 2.0 * self.preflight.config.joint_margin
+        # Within the ranges less twice the joint margin, widened to take in the two ends
+        # (the pre-flight keeps a joint one margin from its limit, not two); a continuous
+        # joint within a turn beyond them.
+        ends = np.minimum(q_lift, q_pre), np.maximum(q_lift, q_pre)
+        low = np.where(
+            robot.continuous, ends[0] - math.pi, np.minimum(robot.q_min + margin, ends[0])
+        )
+        high = np.where(
+            robot.continuous, ends[1] + math.pi, np.maximum(robot.q_max - margin, ends[1])
+        )
+        self._attempts += 1
+        return plan_joint_path(
+            check,
+            q_lift,
+            q_pre,
+            low,
+            high,
+            self.lever_arms,
+            self.preflight.config.clearance + self.cspace.extra_clearance,
+            (self.seed * 7919 + self._attempts) & 0x7FFFFFFF,
+            self.cspace,
+        )
 
     def _exact(self, q: np.ndarray, X_WG: SE3, iterations: int = 20) -> np.ndarray | None:
         """``q`` moved (least-norm Gauss-Newton steps) until the tool is at ``X_WG`` [rad];
