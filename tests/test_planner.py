@@ -24,6 +24,7 @@ from pickplace.planning.candidates import (
 from pickplace.planning.plan import PlanConfig, plan_pick_place
 from pickplace.planning.planner import (
     FOOTPRINT_MARGIN,
+    OTHER_PLACE,
     REFUSAL_CAUSES,
     SAME_APPROACH,
     WRIST_MARGIN,
@@ -232,7 +233,8 @@ def test_after_a_singularity_the_same_approach_is_not_pre_flighted_again() -> No
     report = planner.plan(X_pick, X_place)
     by_label = {g.label: g for g in planner.grasps()}
     axes = [
-        X_pick.rotation().as_matrix() @ by_label[c.label].X_OG.rotation().as_matrix()[:, 2]
+        X_pick.rotation().as_matrix()
+        @ by_label[c.label.removesuffix(OTHER_PLACE)].X_OG.rotation().as_matrix()[:, 2]
         for c in report.candidates
     ]
     kinds = [
@@ -247,6 +249,49 @@ def test_after_a_singularity_the_same_approach_is_not_pre_flighted_again() -> No
         ]
         assert len(same) < 2  # never a third try of an axis that met a singularity twice
     assert report.feasible
+
+
+def test_a_candidate_that_fails_after_the_lift_is_tried_placed_the_other_way_round() -> None:
+    """iiwa14-wsg50, a uniform pose near its base (seed 98746): the best candidate's transfer
+    to the place the wrist's yaw prefers takes joint 4 to its limit; the same grasp placing
+    the brick the other way round (its half-turn symmetry, the tool leaning the other way) is
+    pre-flighted next and is feasible. Only a failure after the lift makes such a twin: a
+    failure at the pick would be met again."""
+    scene = load_scene(robot="iiwa14-wsg50")
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick = brick_on_floor(
+        scene, uniform_placement(scene, np.random.default_rng(98746)), scene.source_bin.floor_top_z
+    )
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    report = planner.plan(X_pick, X_place, first_feasible=False)
+    suffix = OTHER_PLACE
+    labels = [c.label for c in report.candidates]
+    for i, c in enumerate(report.candidates):
+        if c.label.endswith(suffix):
+            twin = report.candidates[i - 1]
+            assert twin.label == c.label.removesuffix(suffix)
+            problem, phases = twin.preflight.problem, twin.plan.phases
+            assert problem is not None and phases is not None
+            assert problem.t > phases.transport[0]
+        else:
+            problem, phases = c.preflight.problem, c.plan.phases
+            failed_late = problem is not None and problem.t > phases.transport[0]
+            twin_tried = i + 1 < len(labels) and labels[i + 1] == c.label + suffix
+            assert twin_tried == failed_late or i + 1 == len(labels)
+    first, second = report.candidates[:2]
+    assert first.preflight.problem is not None and first.preflight.problem.kind == "joint-limit"
+    assert second.label == first.label + suffix and second.preflight.feasible
+    assert report.chosen == 1
+    # The same pick; the places put the brick at the goal, turned by half a turn.
+    X_WG = [c.plan.trajectory.keyframes[i].X_WG for c in (first, second) for i in (2, -2)]
+    assert np.allclose(X_WG[0].wxyz_xyz, X_WG[2].wxyz_xyz, atol=1e-12)
+    X_OG = np.linalg.inv(X_pick.as_matrix()) @ X_WG[0].as_matrix()
+    placed = [X_WG[k].as_matrix() @ np.linalg.inv(X_OG) for k in (1, 3)]
+    assert np.allclose(placed[0][:3, 3], X_place.translation(), atol=1e-12)
+    assert np.allclose(placed[1][:3, 3], X_place.translation(), atol=1e-12)
+    assert np.allclose(
+        placed[0][:3, :3] @ np.diag([-1.0, -1.0, 1.0]), placed[1][:3, :3], atol=1e-12
+    )
 
 
 def test_near_a_wall_the_length_grasp_is_chosen(scene: Scene) -> None:

@@ -81,6 +81,11 @@ class GraspCandidate:
         tilt: Tilt of the approach from vertical about the closing axis [rad].
         offset: Offset of the pads' centre along the face from the face's centre [m].
         turned: The wrist turned half a turn (fingers swapped).
+        other_place: Place the object at its goal turned by its half-turn symmetry about the
+            vertical the other way from the one whose tool yaw is nearer the pick's (the
+            tool leaning the other way at the place): the planner's second try of a
+            candidate whose pre-flight failed after the lift (label ``"…, placed the other
+            way round"``).
     """
 
     label: str
@@ -90,6 +95,7 @@ class GraspCandidate:
     tilt: float
     offset: float
     turned: bool
+    other_place: bool = False
 
 
 def box_grasps(

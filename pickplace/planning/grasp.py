@@ -99,18 +99,20 @@ def choose_grasp(X_WO: SE3, X_WG_current: SE3, grasp_height: float = 0.0) -> SE3
     return first
 
 
-def choose_place_pose(X_WO_goal: SE3, X_OG: SE3, X_WG_reference: SE3) -> SE3:
+def choose_place_pose(X_WO_goal: SE3, X_OG: SE3, X_WG_reference: SE3, other: bool = False) -> SE3:
     """Tool pose ``X_WG`` that puts the held brick at ``X_WO_goal``, up to its π symmetry.
 
     Args:
         X_WO_goal: Goal pose of the brick in world.
         X_OG: Grasp (tool site in brick frame) the brick is held with.
         X_WG_reference: Pose to compare yaws with, normally the pick pose.
+        other: Return the option with the larger yaw change instead.
 
     Returns:
         ``X_WO_goal · X_OG`` or ``X_WO_goal · H · X_OG``, H the half turn about the brick's
         axis nearest vertical (``Rz(π)`` lying with its z up: the same physical brick pose),
-        whichever has the smaller yaw change from ``X_WG_reference`` (ties keep the first).
+        whichever has the smaller yaw change from ``X_WG_reference`` (ties keep the first);
+        with ``other``, the one not chosen so.
 
     Raises:
         PlanError: Invalid pose.
@@ -122,7 +124,7 @@ def choose_place_pose(X_WO_goal: SE3, X_OG: SE3, X_WG_reference: SE3) -> SE3:
     first = X_WO_goal @ X_OG
     # A half turn about the brick's vertical axis (its z when it lies with its z up).
     second = X_WO_goal @ SE3.from_rotation(half_turn(vertical_axis(X_WO_goal.rotation()))) @ X_OG
-    if _yaw_change(second, yaw) < _yaw_change(first, yaw):
+    if (_yaw_change(second, yaw) < _yaw_change(first, yaw)) != other:
         return second
     return first
 

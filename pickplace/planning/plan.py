@@ -363,6 +363,7 @@ def plan_pick_place(
     p_W_base: npt.ArrayLike | None = None,
     X_OG: SE3 | None = None,
     via: str = "swing",
+    other_place: bool = False,
 ) -> Plan:
     """A plan that picks the brick at ``X_WO_pick`` and places it at ``X_WO_place``.
 
@@ -396,6 +397,8 @@ def plan_pick_place(
             equals the shortest arc whenever that total turn is under π, and goes the long
             way round with the swing otherwise. ``"shortest"``: halfway along the shortest
             arc (slerp), which can turn the wrist against the base swing.
+        other_place: Place the brick at its goal turned by half a turn the other way from the
+            yaw-nearest choice (:func:`~pickplace.planning.grasp.choose_place_pose`).
 
     Returns:
         The trajectory through the timed keyframes, the phases (approach: pre-pick → pick;
@@ -419,7 +422,7 @@ def plan_pick_place(
     require_pose("X_OG", X_OG)
     X_WG_pick = X_WO_pick @ X_OG
     X_WG_place = choose_place_pose(
-        X_WO_place, X_OG, swung_pose(X_WG_pick, X_WO_place.translation(), base)
+        X_WO_place, X_OG, swung_pose(X_WG_pick, X_WO_place.translation(), base), other_place
     )
     X_WG_lift = _raised(X_WG_pick, config.lift_height)
     X_WG_pre_place = _backed_off(X_WG_place, config.approach_distance)

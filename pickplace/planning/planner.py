@@ -26,7 +26,10 @@ then the shorter pendulum (the centre of mass's distance from the pad axis), the
 narrower width, then the smaller wrist travel (the nearest yaw, as every plan chose before
 candidates existed). The best :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own
 controller (:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is
-taken; after two of the same approach axis fail near a singularity, the others of that axis
+taken; a candidate whose pre-flight fails after the lift is tried next placing the object the
+other way round (its half-turn symmetry at the goal, the tool leaning the other way:
+:attr:`~pickplace.planning.candidates.GraspCandidate.other_place`), counted among the
+pre-flights; after two of the same approach axis fail near a singularity, the others of that axis
 are passed over (:data:`SAME_APPROACH`). If none is, the report says so, with each pre-flighted
 candidate's first problem; if none passed 1 and 2, with the best-ranked candidate's cheap-test
 problem.
@@ -171,6 +174,10 @@ WRIST_MARGIN = 0.3
 """Predicted distance of the last joint from its limits below which a candidate is ranked
 after those above it [rad]: the prediction counts the last joint alone, and the pre-flight
 measured the others sharing the turn, or the path overshooting it, by up to about 0.2 rad."""
+
+OTHER_PLACE = ", placed the other way round"
+"""What a candidate's label gains when it is tried again placing the object the other way
+round (:attr:`~pickplace.planning.candidates.GraspCandidate.other_place`)."""
 
 
 EXACT_TOLERANCE = 1e-9
@@ -694,21 +701,30 @@ class PickPlacePlanner:
         chosen: int | None = None
         singular: list[np.ndarray] = []  # approach axes of the candidates that met one
         R_WO = X_WO_pick.rotation().as_matrix()
-        for r in ranked:
-            if r.problem is not None or len(tried) == MAX_PREFLIGHTS:
-                break
-            z_W = R_WO @ r.grasp.X_OG.rotation().as_matrix()[:, 2]
+        queue = [r.grasp for r in ranked if r.problem is None]
+        while queue and len(tried) < MAX_PREFLIGHTS:
+            grasp = queue.pop(0)
+            z_W = R_WO @ grasp.X_OG.rotation().as_matrix()[:, 2]
             if sum(float(z_W @ a) > math.cos(SAME_APPROACH) for a in singular) >= 2:
                 continue  # an approach that met a singularity twice
             stop_point()  # a long planning may be cut by a stop request (pickplace.signals)
-            plan, result, warning, attempt = self.planned(X_WO_pick, X_WO_place, r.grasp, start)
-            tried.append(Candidate(r.grasp.label, plan, result, warning, attempt))
-            if result.problem is not None and result.problem.kind == "singularity":
+            plan, result, warning, attempt = self.planned(X_WO_pick, X_WO_place, grasp, start)
+            tried.append(Candidate(grasp.label, plan, result, warning, attempt))
+            problem = result.problem
+            if problem is not None and problem.kind == "singularity":
                 singular.append(z_W)
             if result.feasible and chosen is None:
                 chosen = len(tried) - 1
                 if first_feasible:
                     break
+            elif (
+                problem is not None
+                and not grasp.other_place
+                and plan.phases is not None
+                and problem.t > plan.phases.transport[0]
+            ):
+                other = replace(grasp, other_place=True, label=grasp.label + OTHER_PLACE)
+                queue.insert(0, other)
         if not tried:  # none passed the cheap tests: the best one, with its problem
             best = ranked[0]
             plan = self.make_plan(X_WO_pick, X_WO_place, best.grasp, start=start)
@@ -1394,4 +1410,5 @@ class PickPlacePlanner:
             config,
             p_W_base=self.scene.robot.p_W_base,
             X_OG=grasp.X_OG,
+            other_place=grasp.other_place,
         )
