@@ -26,11 +26,12 @@ then the shorter pendulum (the centre of mass's distance from the pad axis), the
 narrower width, then the smaller wrist travel (the nearest yaw, as every plan chose before
 candidates existed). The best :data:`MAX_PREFLIGHTS` are pre-flighted with the run's own
 controller (:mod:`pickplace.planning.preflight`) in that order, and the first feasible one is
-taken; a candidate whose pre-flight fails after the lift is tried next placing the object the
-other way round (its half-turn symmetry at the goal, the tool leaning the other way:
+taken; a candidate whose pre-flight fails after the lift, but not near a singularity (the
+transfer's is C-space's to avoid, below), is tried next placing the object the other way
+round (its half-turn symmetry at the goal, the tool leaning the other way:
 :attr:`~pickplace.planning.candidates.GraspCandidate.other_place`), counted among the
-pre-flights; after two of the same approach axis fail near a singularity, the others of that axis
-are passed over (:data:`SAME_APPROACH`). If none is, the report says so, with each pre-flighted
+pre-flights; after two of the same approach axis fail near a singularity, the others of that
+axis are passed over (:data:`SAME_APPROACH`). If none is, the report says so, with each pre-flighted
 candidate's first problem; if none passed 1 and 2, with the best-ranked candidate's cheap-test
 problem.
 
@@ -719,6 +720,7 @@ class PickPlacePlanner:
                     break
             elif (
                 problem is not None
+                and problem.kind != "singularity"  # the transfer's is C-space's to avoid
                 and not grasp.other_place
                 and plan.phases is not None
                 and problem.t > plan.phases.transport[0]
