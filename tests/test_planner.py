@@ -67,13 +67,16 @@ def test_candidates_are_antipodal_opened_by_the_clearance_and_keep_the_pads_on_t
 ) -> None:
     """Every candidate closes along a box axis through the box's centre plane, approaches
     perpendicular to it within the largest tilt of vertical, opens to the width plus
-    PAD_CLEARANCE a side, and keeps the pad on the face; each comes with its wrist twin."""
+    PAD_CLEARANCE a side (and, its tight twin, plus MIN_PAD_CLEARANCE), and keeps the pad on
+    the face; each comes with its wrist twin."""
     planner = PickPlacePlanner(scene, "qp")
     half = scene.brick_half_extents
     grasps = planner.grasps()
-    # 2 face pairs (the iiwa's WSG opens 100 mm) x 5 tilts x 3 offsets x 2 turns.
-    assert len(grasps) == 2 * (2 * len(GRASP_TILTS) - 1) * len(GRASP_OFFSET_FRACTIONS) * 2
+    # 2 face pairs (the iiwa's WSG opens 100 mm) x 5 tilts x 3 offsets x 2 turns x 2 openings.
+    assert len(grasps) == 2 * (2 * len(GRASP_TILTS) - 1) * len(GRASP_OFFSET_FRACTIONS) * 2 * 2
     assert grasps[0].label == "across the width"
+    tight = f", opened {MIN_PAD_CLEARANCE * 1000:.0f} mm a side"
+    by_label = {g.label: g for g in grasps}
     for g in grasps:
         R = g.X_OG.rotation().as_matrix()
         y_O, z_O, x_O = R[:, 1], R[:, 2], R[:, 0]
@@ -81,7 +84,12 @@ def test_candidates_are_antipodal_opened_by_the_clearance_and_keep_the_pads_on_t
         assert abs(abs(y_O[axis]) - 1.0) < 1e-12  # closing along a box axis: antipodal faces
         assert axis in (0, 1)
         assert g.width == pytest.approx(2.0 * half[axis], abs=1e-12)
-        assert g.open_width == pytest.approx(g.width + 2.0 * PAD_CLEARANCE, abs=1e-12)
+        if g.label.endswith(tight):
+            assert g.open_width == pytest.approx(g.width + 2.0 * MIN_PAD_CLEARANCE, abs=1e-12)
+            full = by_label[g.label.removesuffix(tight)]  # the same pads, opened wider
+            assert full.X_OG is g.X_OG or np.allclose(full.X_OG.wxyz_xyz, g.X_OG.wxyz_xyz)
+        else:
+            assert g.open_width == pytest.approx(g.width + 2.0 * PAD_CLEARANCE, abs=1e-12)
         p = g.X_OG.translation()
         assert abs(p[axis]) < 1e-12 and abs(p[2]) < 1e-12  # midway between the faces
         assert math.acos(float(np.clip(-z_O[2], -1.0, 1.0))) == pytest.approx(abs(g.tilt))
@@ -89,7 +97,6 @@ def test_candidates_are_antipodal_opened_by_the_clearance_and_keep_the_pads_on_t
         along = 1 - axis  # the offset runs along the face, horizontally
         assert abs(p[along]) + planner.pad_half_length <= half[along] + 1e-12
         assert abs(p[along]) == pytest.approx(abs(g.offset), abs=1e-12)
-    by_label = {g.label: g for g in grasps}
     for g in grasps:
         if g.turned:
             twin = by_label[g.label.replace(", turned 180°", "")]
@@ -117,18 +124,21 @@ def test_a_narrow_gripper_closes_across_the_length_with_what_it_opens_beyond_it(
 ) -> None:
     """Closing across the 75 mm length: 6 mm a side where the fingers open to 87 mm, what
     they open beyond it a side down to MIN_PAD_CLEARANCE (80 mm: 2.5 mm), none below 79 mm;
-    across the 50 mm width always 6 mm."""
+    across the 50 mm width always 6 mm. Where a side has more than MIN_PAD_CLEARANCE, its
+    tight twin opens only that a side as well."""
     planner = PickPlacePlanner(scene, "qp", PlanConfig(open_width=open_width))
     length = 2.0 * float(scene.brick_half_extents[0])
     by_name: dict[str, set[float]] = {}
     for g in planner.grasps():
         by_name.setdefault(g.label.split(",")[0], set()).add(round(g.open_width - g.width, 12))
-    assert by_name["across the width"] == {round(2.0 * PAD_CLEARANCE, 12)}
+    both = {round(2.0 * PAD_CLEARANCE, 12), round(2.0 * MIN_PAD_CLEARANCE, 12)}
+    assert by_name["across the width"] == both
     if length_clearance is None:
         assert "across the length" not in by_name
         assert length + 2.0 * MIN_PAD_CLEARANCE > open_width
     else:
-        assert by_name["across the length"] == {round(2.0 * length_clearance, 12)}
+        tight = round(2.0 * MIN_PAD_CLEARANCE, 12)
+        assert by_name["across the length"] == {round(2.0 * length_clearance, 12), tight}
 
 
 def test_the_open_hand_s_footprint_is_the_distance_of_its_hulls_to_the_walls(

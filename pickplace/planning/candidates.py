@@ -38,7 +38,7 @@ import numpy as np
 import numpy.typing as npt
 from mink.lie import SE3, SO3
 
-from pickplace.robot.calibration import pad_clearance
+from pickplace.robot.calibration import MIN_PAD_CLEARANCE, pad_clearance
 from pickplace.world.objects import ObjectGeometry
 from pickplace.world.scene import BinGeometry
 
@@ -81,6 +81,10 @@ class GraspCandidate:
         tilt: Tilt of the approach from vertical about the closing axis [rad].
         offset: Offset of the pads' centre along the face from the face's centre [m].
         turned: The wrist turned half a turn (fingers swapped).
+        tight: A tight twin: the same pads as the candidate labelled without
+            :data:`TIGHT_LABEL`, opened only :data:`~pickplace.robot.calibration.
+            MIN_PAD_CLEARANCE` a side (the planner ranks it only where that one fails the
+            footprint).
         other_place: Place the object at its goal turned by its half-turn symmetry about the
             vertical the other way from the one whose tool yaw is nearer the pick's (the
             tool leaning the other way at the place): the planner's second try of a
@@ -96,6 +100,7 @@ class GraspCandidate:
     offset: float
     turned: bool
     other_place: bool = False
+    tight: bool = False
 
 
 def box_grasps(
@@ -138,10 +143,9 @@ def box_grasps(
     )
     for name, axis, R_base in bases:
         width = 2.0 * float(h[axis])
-        clearance = pad_clearance(width, max_open_width)
-        if clearance is None:
+        openings = _openings(width, max_open_width)
+        if not openings:
             continue
-        open_width = width + 2.0 * clearance
         x_O = R_base.as_matrix()[:, 0]  # G's x in O: along the face, horizontal
         travel = max(0.0, float(np.abs(x_O) @ h) - pad_half_length)
         signed_tilts = [0.0] + [s * t for t in tilts if t > 0.0 for s in (1.0, -1.0)]
@@ -159,15 +163,19 @@ def box_grasps(
                         up = height * rise
                         if height and up == 0.0:
                             continue
-                        yield GraspCandidate(
-                            label + (f", {up * 1000:.0f} mm up" if up else ""),
-                            SE3.from_translation(np.array([0.0, 0.0, up])) @ X if up else X,
-                            width,
-                            open_width,
-                            tilt,
-                            offset,
-                            turned,
-                        )
+                        for open_width, tight in openings:
+                            yield GraspCandidate(
+                                label
+                                + (f", {up * 1000:.0f} mm up" if up else "")
+                                + (TIGHT_LABEL if tight else ""),
+                                SE3.from_translation(np.array([0.0, 0.0, up])) @ X if up else X,
+                                width,
+                                open_width,
+                                tilt,
+                                offset,
+                                turned,
+                                tight=tight,
+                            )
 
 
 GRASP_YAWS = 12
@@ -225,10 +233,9 @@ def object_grasps(
         x_O, d = M[:, 0], M[:, 1]  # G's x (horizontal, along the pads) and the closing axis
         plus, minus = shape.support(d), shape.support(-d)
         width = plus + minus
-        clearance = pad_clearance(width, max_open_width)
-        if clearance is None:
+        openings = _openings(width, max_open_width)
+        if not openings:
             continue
-        open_width = width + 2.0 * clearance
         spans = []
         gap = 0.0
         (c1, h1), (c2, h2) = shape.patch(d), shape.patch(-d)
@@ -266,7 +273,36 @@ def object_grasps(
                             else X_OG
                         )
                         text = label + (", turned 180°" if turned else "")
-                        yield GraspCandidate(text, X, width, open_width, tilt, sx, turned)
+                        for open_width, tight in openings:
+                            yield GraspCandidate(
+                                text + (TIGHT_LABEL if tight else ""),
+                                X,
+                                width,
+                                open_width,
+                                tilt,
+                                sx,
+                                turned,
+                                tight=tight,
+                            )
+
+
+TIGHT_LABEL = f", opened {MIN_PAD_CLEARANCE * 1000:.0f} mm a side"
+"""What a tight twin's label adds to its sibling's (:attr:`GraspCandidate.tight`)."""
+
+
+def _openings(width: float, max_open_width: float) -> list[tuple[float, bool]]:
+    """The gaps [m] the gripper opens to around a side ``width`` [m] wide, each with whether
+    it is a tight twin: ``width`` plus :func:`~pickplace.robot.calibration.pad_clearance` a
+    side, and, where that is more than :data:`~pickplace.robot.calibration.
+    MIN_PAD_CLEARANCE`, also plus only that (the fingers open up to 8 mm less, for an object
+    near a wall); none where the gripper does not open to the least of it."""
+    clearance = pad_clearance(width, max_open_width)
+    if clearance is None:
+        return []
+    out = [(width + 2.0 * clearance, False)]
+    if clearance > MIN_PAD_CLEARANCE:
+        out.append((width + 2.0 * MIN_PAD_CLEARANCE, True))
+    return out
 
 
 def _label(name: str, tilt: float, offset: float, turned: bool) -> str:

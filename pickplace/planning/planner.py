@@ -85,6 +85,7 @@ from pickplace.planning.candidates import (
     GRASP_HEIGHT_FRACTIONS,
     GRAVITY,
     HAND_OBJECT_MARGIN,
+    TIGHT_LABEL,
     GraspCandidate,
     HandFootprint,
     HandObjectGaps,
@@ -983,6 +984,14 @@ class PickPlacePlanner:
                     bool(near_walls[i] < clearance + FOOTPRINT_MARGIN),
                 )
             )
+        # A tight twin only where its sibling, opened with the whole clearance, fails the
+        # footprint: elsewhere it would fail the pre-flight as its sibling does.
+        wide_enough = {r.grasp.label for r in out if not r.grasp.tight and r.problem is None}
+        out = [
+            r
+            for r in out
+            if not (r.grasp.tight and r.grasp.label.removesuffix(TIGHT_LABEL) in wide_enough)
+        ]
         out.sort(key=Ranked.key)
         if out[0].problem == "footprint":
             out[0] = replace(out[0], problem=self._footprint_text(X_WO_pick, X_WO_place, out[0]))
