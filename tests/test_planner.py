@@ -19,6 +19,7 @@ from pickplace.planning.candidates import (
     GRASP_OFFSET_FRACTIONS,
     GRASP_TILTS,
     GRAVITY,
+    TIGHT_LABEL,
     gravity_torque,
 )
 from pickplace.planning.plan import PlanConfig, plan_pick_place
@@ -335,6 +336,45 @@ def test_a_brick_resting_against_a_wall_is_picked(scene: Scene) -> None:
     assert kinds[scene.brick_geom_id, scene.model.geom("bin1_wall_py").id] == 2
     report = planner.plan(X_pick, X_place)
     assert report.feasible, report.problems()
+
+
+def test_a_tight_twin_is_ranked_only_where_its_sibling_fails_the_footprint() -> None:
+    """ur5e-2f85, a uniform pose along bin 1's wall (seed 98680): every grasp opened 6 mm a
+    side puts a finger within the clearance of the wall; the same grasp opened 2 mm a side
+    fits and plans. No tight twin is ranked whose sibling passes the cheap tests."""
+    scene = load_scene(robot="ur5e-2f85")
+    planner = PickPlacePlanner(scene, "qp")
+    X_pick = brick_on_floor(
+        scene, uniform_placement(scene, np.random.default_rng(98680)), scene.source_bin.floor_top_z
+    )
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    ranked = planner.rank(X_pick, X_place)
+    by_label = {r.grasp.label: r for r in ranked}
+    assert all(r.problem is not None for r in ranked if not r.grasp.tight)
+    tight = [r for r in ranked if r.grasp.tight]
+    assert tight and tight[0].problem is None
+    for r in tight:
+        sibling = by_label[r.grasp.label.removesuffix(TIGHT_LABEL)]
+        assert sibling.problem is not None and sibling.cheap_test == "footprint"
+        assert r.grasp.open_width == pytest.approx(r.grasp.width + 2.0 * MIN_PAD_CLEARANCE)
+        assert sibling.grasp.X_OG is r.grasp.X_OG or np.allclose(
+            sibling.grasp.X_OG.wxyz_xyz, r.grasp.X_OG.wxyz_xyz
+        )
+        if r.problem is None:  # opened less, the hand keeps more room from the walls
+            assert r.clearance > sibling.clearance
+    report = planner.plan(X_pick, X_place)
+    assert report.feasible
+    assert report.candidates[report.chosen or 0].label.endswith(TIGHT_LABEL)
+
+
+@pytest.mark.slow
+def test_a_brick_along_a_wall_is_picked_with_the_tight_twin() -> None:
+    """The pose above, in the physics: the pads opened 2 mm a side come down beside the
+    brick, close on it and place it."""
+    result = finished("pick-place-uniform", seed=98680, robot="ur5e-2f85").result
+    s = result.summary()
+    assert s["success"], s.get("failure_text")
+    assert s["max_robot_world_contact_force_n"] == 0.0
 
 
 def test_swing_via_point_equals_the_shortest_arc_under_a_half_turn(scene: Scene) -> None:

@@ -9,7 +9,8 @@ same from its support patches at 12 closing directions): the pads on two opposit
 the box (antipodal: the faces' normals are the closing axis), for each pair of side faces
 whose width plus a clearance on each side the gripper opens to
 (:func:`~pickplace.robot.calibration.pad_clearance`: 6 mm where it opens that wide, down to 2 mm
-where it does not):
+where it does not), and, where that is more than 2 mm, its tight twin opened only 2 mm a side
+(:attr:`GraspCandidate.tight`: the fingers open up to 8 mm less, for an object beside a wall):
 
 * the approach from straight down (``R_OG = Ry(π)`` across the width) tilted about the
   closing axis by each angle of :data:`GRASP_TILTS`, either way: a rotation about the face
