@@ -21,13 +21,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+from mink.lie import SE3
 
+from pickplace.planning.planner import PickPlacePlanner
 from pickplace.robot.registry import DEFAULT_ROBOT
 from pickplace.run.runner import RunRequest, prepare
 from pickplace.sim.loader import load_scene
 from pickplace.sim.loop import Simulation
 from pickplace.sim.verdict import WALL_TIME_FIELDS, RunResult
+from pickplace.world.placements import brick_on_floor, target_placement, uniform_placement
 from pickplace.world.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent
@@ -82,6 +86,17 @@ def _finished(scenario: str, controller: str, seed: int, robot: str) -> Finished
         RunRequest(scenario=scenario, controller=controller, seed=seed, robot=robot)
     )
     return Finished(sim, sim.run())
+
+
+def uniform_task(robot: str, seed: int) -> tuple[Scene, PickPlacePlanner, SE3, SE3]:
+    """The scene of ``robot``, a qp planner, and pick-place-uniform's brick pose of ``seed``
+    on bin 1's floor with the goal on bin 2's: what the planner tests of one uniform pose
+    start from."""
+    scene = load_scene(robot=robot)
+    placement = uniform_placement(scene, np.random.default_rng(seed))
+    X_pick = brick_on_floor(scene, placement, scene.source_bin.floor_top_z)
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    return scene, PickPlacePlanner(scene, "qp"), X_pick, X_place
 
 
 def without_wall_time(summary: dict[str, Any]) -> dict[str, Any]:

@@ -26,6 +26,7 @@ from pickplace.world.cell import ObstacleCell
 from pickplace.world.obstacles import with_obstacles
 from pickplace.world.placements import brick_on_floor, nominal_placement, target_placement
 from pickplace.world.scene import Scene
+from tests.conftest import uniform_task
 
 # Tall enough that the Cartesian transfer's brick runs into it (measured: the via-point path
 # passes 8 mm over a 0.22 m divider), low enough to clear the hand at home (0.29 m).
@@ -132,14 +133,7 @@ def test_a_transfer_through_a_singularity_is_planned_in_cspace_instead() -> None
     takes the wrist to σmin 0.016 (the pre-flight's floor is 0.02) with every candidate; a
     joint-space path between the same lift and pre-place configurations keeps σmin above
     the floor, and the plan is feasible."""
-    from pickplace.world.placements import uniform_placement
-
-    scene = load_scene(robot="panda-hand")
-    planner = PickPlacePlanner(scene, "qp")
-    X_pick = brick_on_floor(
-        scene, uniform_placement(scene, np.random.default_rng(98670)), scene.source_bin.floor_top_z
-    )
-    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    _, planner, X_pick, X_place = uniform_task("panda-hand", 98670)
     report = planner.plan(X_pick, X_place)
     assert report.feasible
     chosen = report.candidates[report.chosen or 0]

@@ -46,7 +46,7 @@ from pickplace.world.placements import (
     uniform_placement,
 )
 from pickplace.world.scene import Scene
-from tests.conftest import CliRun, finished
+from tests.conftest import CliRun, finished, uniform_task
 from tests.toy_robot import TOY_TOML, write_toy_robot
 
 # A corner of bin 1 where no grasp fits: the brick against two walls, the WSG's 146 mm palm
@@ -268,12 +268,7 @@ def test_a_candidate_that_fails_after_the_lift_is_tried_placed_the_other_way_rou
     the brick the other way round (its half-turn symmetry, the tool leaning the other way) is
     pre-flighted next and is feasible. Only a failure after the lift makes such a twin: a
     failure at the pick would be met again."""
-    scene = load_scene(robot="iiwa14-wsg50")
-    planner = PickPlacePlanner(scene, "qp")
-    X_pick = brick_on_floor(
-        scene, uniform_placement(scene, np.random.default_rng(98746)), scene.source_bin.floor_top_z
-    )
-    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    _, planner, X_pick, X_place = uniform_task("iiwa14-wsg50", 98746)
     report = planner.plan(X_pick, X_place, first_feasible=False)
     suffix = OTHER_PLACE
     labels = [c.label for c in report.candidates]
@@ -342,12 +337,7 @@ def test_a_tight_twin_is_ranked_only_where_its_sibling_fails_the_footprint() -> 
     """ur5e-2f85, a uniform pose along bin 1's wall (seed 98680): every grasp opened 6 mm a
     side puts a finger within the clearance of the wall; the same grasp opened 2 mm a side
     fits and plans. No tight twin is ranked whose sibling passes the cheap tests."""
-    scene = load_scene(robot="ur5e-2f85")
-    planner = PickPlacePlanner(scene, "qp")
-    X_pick = brick_on_floor(
-        scene, uniform_placement(scene, np.random.default_rng(98680)), scene.source_bin.floor_top_z
-    )
-    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    _, planner, X_pick, X_place = uniform_task("ur5e-2f85", 98680)
     ranked = planner.rank(X_pick, X_place)
     by_label = {r.grasp.label: r for r in ranked}
     assert all(r.problem is not None for r in ranked if not r.grasp.tight)
