@@ -506,6 +506,9 @@ class GraspSet:
         open_widths: Their open widths (n,) [m].
         arms: The centre of mass's distance from each pad axis (n,) [m]: the pendulum a held
             object swings on about it.
+        siblings: For a tight twin, the index of its sibling opened with the whole clearance
+            (:attr:`~pickplace.planning.candidates.GraspCandidate.tight`); -1 for the others
+            (and for a twin whose sibling is not in the set).
     """
 
     grasps: list[GraspCandidate]
@@ -513,6 +516,7 @@ class GraspSet:
     p_OG: FloatArray
     open_widths: FloatArray
     arms: FloatArray
+    siblings: np.ndarray
 
     @classmethod
     def of(cls, grasps: list[GraspCandidate], p_O_com: FloatArray) -> GraspSet:
@@ -523,14 +527,29 @@ class GraspSet:
         y_O = R_OG[:, :, 1]
         along = np.einsum("ni,ni->n", r_O, y_O)[:, None] * y_O
         arms = np.linalg.norm(r_O - along, axis=1)
-        return cls(grasps, R_OG, p_OG, np.array([g.open_width for g in grasps]), arms)
+        open_widths = np.array([g.open_width for g in grasps])
+        return cls(grasps, R_OG, p_OG, open_widths, arms, _siblings(grasps))
 
     def select(self, keep: np.ndarray) -> GraspSet:
         """The candidates where ``keep`` (n,) is true, in their order."""
         grasps = [g for g, k in zip(self.grasps, keep, strict=True) if k]
         return GraspSet(
-            grasps, self.R_OG[keep], self.p_OG[keep], self.open_widths[keep], self.arms[keep]
+            grasps,
+            self.R_OG[keep],
+            self.p_OG[keep],
+            self.open_widths[keep],
+            self.arms[keep],
+            _siblings(grasps),
         )
+
+
+def _siblings(grasps: list[GraspCandidate]) -> np.ndarray:
+    """Per candidate, the index of a tight twin's sibling among ``grasps`` (-1 if none)."""
+    index = {g.label: i for i, g in enumerate(grasps) if not g.tight}
+    return np.array(
+        [index.get(g.label.removesuffix(TIGHT_LABEL), -1) if g.tight else -1 for g in grasps],
+        dtype=np.intp,
+    )
 
 
 class PickPlacePlanner:
@@ -916,26 +935,37 @@ class PickPlacePlanner:
         # against the walls alone for the room beyond the clearance (FOOTPRINT_MARGIN).
         near = np.full(n, np.inf)
         near_walls = np.full(n, np.inf)
-        # The hand opens to the grasp's width at the pick, to the whole opening at the release.
-        for width in np.unique(open_widths):
-            sel = open_widths == width
-            for R, p, bin_, w in (
-                (R_pick, p_pick, self.bin_at(X_WO_pick), width),
-                (R_place, p_place, self.bin_at(X_WO_place), self.config.open_width),
-            ):
-                if bin_ is None:
-                    continue  # on the ground: the pre-flight checks the hand there
-                R_BW, p_BW = self._bin_frames[bin_.name]
-                to_bin, to_walls = self.hand.clearances(
-                    np.einsum("ij,njk->nik", R_BW, R[sel]),
-                    p[sel] @ R_BW.T + p_BW,
-                    w,
-                    bin_,
-                    exact_below=clearance,
-                    walls_exact_below=clearance + FOOTPRINT_MARGIN,
-                )
-                near[sel] = np.minimum(near[sel], to_bin)
-                near_walls[sel] = np.minimum(near_walls[sel], to_walls)
+
+        def footprints(todo: np.ndarray) -> None:
+            # The hand opens to the grasp's width at the pick, to the whole opening at the
+            # release.
+            for width in np.unique(open_widths[todo]):
+                sel = todo & (open_widths == width)
+                for R, p, bin_, w in (
+                    (R_pick, p_pick, self.bin_at(X_WO_pick), width),
+                    (R_place, p_place, self.bin_at(X_WO_place), self.config.open_width),
+                ):
+                    if bin_ is None:
+                        continue  # on the ground: the pre-flight checks the hand there
+                    R_BW, p_BW = self._bin_frames[bin_.name]
+                    to_bin, to_walls = self.hand.clearances(
+                        np.einsum("ij,njk->nik", R_BW, R[sel]),
+                        p[sel] @ R_BW.T + p_BW,
+                        w,
+                        bin_,
+                        exact_below=clearance,
+                        walls_exact_below=clearance + FOOTPRINT_MARGIN,
+                    )
+                    near[sel] = np.minimum(near[sel], to_bin)
+                    near_walls[sel] = np.minimum(near_walls[sel], to_walls)
+
+        # A tight twin only where its sibling, opened with the whole clearance, fails the
+        # footprint: elsewhere it would fail the pre-flight as its sibling does.
+        sibling = candidates.siblings
+        twin = sibling >= 0
+        footprints(~twin)
+        wanted = ~twin | (near[np.maximum(sibling, 0)] < clearance)
+        footprints(twin & wanted)
         # The wrist: the tool's yaw changes, less what the base swing carries along, are the
         # last joint's turns over its axis' vertical component: from home to the pick (the
         # first motion slerps the tool's orientation the shorter way round, so its yaw turns
@@ -964,6 +994,8 @@ class PickPlacePlanner:
         torque = np.abs(np.einsum("ni,ni->n", R_pick[:, :, 1], np.cross(r, weight)))
         out = []
         for i, g in enumerate(grasps):
+            if not wanted[i]:
+                continue
             problem = None
             if far[i] > self.reach:
                 problem = (
@@ -984,14 +1016,6 @@ class PickPlacePlanner:
                     bool(near_walls[i] < clearance + FOOTPRINT_MARGIN),
                 )
             )
-        # A tight twin only where its sibling, opened with the whole clearance, fails the
-        # footprint: elsewhere it would fail the pre-flight as its sibling does.
-        wide_enough = {r.grasp.label for r in out if not r.grasp.tight and r.problem is None}
-        out = [
-            r
-            for r in out
-            if not (r.grasp.tight and r.grasp.label.removesuffix(TIGHT_LABEL) in wide_enough)
-        ]
         out.sort(key=Ranked.key)
         if out[0].problem == "footprint":
             out[0] = replace(out[0], problem=self._footprint_text(X_WO_pick, X_WO_place, out[0]))
