@@ -538,7 +538,8 @@ class HandFootprint:
         self._posed: float | None = None
         hulls = [hull_of(model, int(g)) for g in self.geom_ids]
         self._hull_local = [v for v, _ in hulls]
-        self._hull_edges = [e for _, e in hulls]
+        self.hull_edges = [e for _, e in hulls]
+        """Each geom's hull edges, as pairs of indices into its own vertices."""
         self.hull_geom = np.repeat(np.arange(len(hulls), dtype=np.intp), [len(v) for v, _ in hulls])
         """The hand geom (an index into :attr:`geom_ids`) of each vertex of :meth:`hull_G`."""
         # The geoms whose hull is tighter than their bounding box (all but boxes).
@@ -696,7 +697,7 @@ class HandFootprint:
             rows = np.flatnonzero(bin_near | walls_near)
             if len(rows):
                 w, f, q = _clipped_gaps(
-                    R_BG[rows], p_BG[rows], hulls[j], self._hull_edges[j], top_z, floor_z, half
+                    R_BG[rows], p_BG[rows], hulls[j], self.hull_edges[j], top_z, floor_z, half
                 )
                 g = _with_floor(w, f)
                 i = np.argmin(g, axis=1)

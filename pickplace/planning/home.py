@@ -34,7 +34,7 @@ def choose_home(scene: Scene, candidates: tuple[np.ndarray, ...]) -> np.ndarray:
     best, best_rank = candidates[0], None
     for q in candidates:
         trial = dataclasses.replace(scene, robot=dataclasses.replace(scene.robot, q_home=q))
-        report = PickPlacePlanner(trial, HOME_CONTROLLER).plan(X_pick, X_place)
+        report = PickPlacePlanner(trial, HOME_CONTROLLER, push=False).plan(X_pick, X_place)
         rank = _rank(report)
         if best_rank is None or rank < best_rank:
             best, best_rank = q, rank

@@ -35,6 +35,13 @@ axis are passed over (:data:`SAME_APPROACH`). If none is, the report says so, wi
 candidate's first problem; if none passed 1 and 2, with the best-ranked candidate's cheap-test
 problem.
 
+When no grasp candidate is feasible where the object lies (beside a wall, in a corner), the
+planner looks for a push that slides it to where one is (:mod:`pickplace.planning.push`: the
+closed fingers behind it, the shortest push after which a grasp candidate is feasible at the
+predicted pose); that push's plan, pre-flighted, is then the report's chosen candidate, and
+the run plans the pick after it from where the object came to rest
+(:mod:`pickplace.sim.recovery`).
+
 A plan starts at the home posture unless given a :class:`Start` (the configuration and tool
 pose where the arm stopped, when a run tries again: :mod:`pickplace.sim.recovery`); its
 candidates then start at that pose, the wrist's margin is predicted from that configuration
@@ -118,6 +125,7 @@ from pickplace.planning.preflight import (
     Problem,
     start_configuration,
 )
+from pickplace.planning.push import Pusher, PushTrajectory
 from pickplace.planning.timing import (
     GripTooWeakError,
     SegmentLimits,
@@ -155,6 +163,11 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     """Angles wrapped into [-π, π) [rad]."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
+
+MAX_PUSH_PREFLIGHTS = 6
+"""Most pushes pre-flighted in one planning (:mod:`pickplace.planning.push`), shortest first:
+a push whose hand meets a wall on the way down (the arm's links, not the hand, which the
+push's own tests clear) is followed by its other hand poses and the next push."""
 
 MAX_PREFLIGHTS = 8
 """Most candidates pre-flighted in one planning, best-ranked first. Eight, not four: on
@@ -565,6 +578,8 @@ class PickPlacePlanner:
         timing: How plans are timed by the robot's limits.
         seed: The run's seed: seeds the C-space planner's random numbers (with the attempt).
         cspace: Budget and resolution of C-space planning.
+        push: Whether :meth:`plan` pushes the object where no grasp candidate is feasible
+            (:mod:`pickplace.planning.push`).
 
     Raises:
         ObjectError: The object has no grasp the gripper opens to (wider than its opening
@@ -580,8 +595,10 @@ class PickPlacePlanner:
         timing: TimingConfig | None = None,
         seed: int = 0,
         cspace: CSpaceConfig | None = None,
+        push: bool = True,
     ) -> None:
         self.scene = scene
+        self.push = bool(push)
         self.seed = int(seed)
         self.cspace = cspace or CSpaceConfig()
         self._cspace_time = 0.0
@@ -635,6 +652,15 @@ class PickPlacePlanner:
             height = 2.0 * float(scene.object.half_extents[2])
             self._set = self._clear_of_hand(GraspSet.of(grasps, self.p_O_com), height)
             self._grasps = self._set.grasps
+            self.pusher = Pusher(
+                scene,
+                self.hand,
+                HandObjectGaps(self.hand, scene.object),
+                self.config,
+                self.preflight.config.clearance,
+                self.clearance_z,
+                yaw_of(self.X_WG_home.rotation()),
+            )
         else:
             shape = scene.object
             narrowest = 2.0 * shape.min_footprint_half
@@ -694,9 +720,10 @@ class PickPlacePlanner:
         first_feasible: bool = True,
         start: Start | None = None,
         turn: FloatArray | None = None,
+        push: bool | None = None,
     ) -> PlanningReport:
         """Rank the candidates, pre-flight the best few in order; stop at the first feasible
-        one (unless told not to).
+        one (unless told not to); if none is, look for a push (module docstring).
 
         Args:
             X_WO_pick: Brick pose to pick, in world.
@@ -708,6 +735,8 @@ class PickPlacePlanner:
                 standing on its end): the turn R (3, 3) of its frame O such that it lies with
                 the z of ``O · R`` up (:func:`~pickplace.geometry.upright_turn`); the grasps
                 are then the box's in that frame (:meth:`turned_grasps`). None: O's z is up.
+            push: Whether to look for a push when no grasp is feasible (None: the planner's
+                own :attr:`push`; never for a ``turn``).
 
         Raises:
             PlanError: ``start.q`` is not one finite angle per arm joint, or a ``turn`` for an
@@ -755,11 +784,63 @@ class PickPlacePlanner:
                     best.grasp.label, plan, self._refused(plan, best), refused_by=best.cheap_test
                 )
             )
+        if chosen is None and (self.push if push is None else push) and turn is None:
+            cspace_time = self._cspace_time
+            pushed = self._push_candidate(X_WO_pick, X_WO_place, start)
+            self._cspace_time = cspace_time
+            if pushed is not None:
+                tried.append(pushed)
+                chosen = len(tried) - 1
         total = time.perf_counter() - t0
         times = {"cartesian": total - self._cspace_time, "c-space": self._cspace_time}
         return PlanningReport(
             tuple(tried), chosen, total, self.preflight.config, len(ranked), times
         )
+
+    def _push_candidate(
+        self, X_WO_pick: SE3, X_WO_place: SE3, start: Start | None
+    ) -> Candidate | None:
+        """A push after which some grasp candidate is feasible, as a pre-flighted candidate
+        (:mod:`pickplace.planning.push`), or None (none found, or its pre-flight fails)."""
+        bin_ = self.bin_at(X_WO_pick)
+        if bin_ is None:
+            return None
+
+        def pickable_at(X_WO: SE3) -> bool:
+            return any(r.problem is None for r in self.rank(X_WO, X_WO_place, None))
+
+        def feasible_at(X_WO: SE3) -> bool:
+            return self.plan(X_WO, X_WO_place, push=False).feasible
+
+        X_from = self.X_WG_home if start is None else start.X_WG
+        q_start = None if start is None else start.q
+        failed: list[SE3] = []  # hand poses whose way down to the push's start met the world
+        tried = 0
+        for push in self.pusher.pushes(X_WO_pick, bin_, feasible_at, pickable_at):
+            if tried >= MAX_PUSH_PREFLIGHTS:
+                break
+            if any(push.X_WG_start is X for X in failed):
+                continue  # the same way down, only pushing further
+            tried += 1
+            config = self.config
+            for _ in range(SWEEP_SLOWDOWNS + 1):
+                plan = self.pusher.plan(push, X_from, self.config.open_width, config)
+                result = self.preflight.run(plan, X_WO_pick, None, q_start=q_start)
+                problem = result.problem
+                if problem is None or problem.kind not in ("speed-limit", "ik"):
+                    break
+                config = replace(
+                    config,
+                    max_linear_speed=0.5 * config.max_linear_speed,
+                    max_angular_speed=0.5 * config.max_angular_speed,
+                )
+            if result.feasible:
+                return Candidate(push.label, plan, result)
+            traj = plan.trajectory
+            assert isinstance(traj, PushTrajectory)
+            if problem is not None and problem.t < traj.push_start_time:
+                failed.append(push.X_WG_start)
+        return None
 
     def observe_world(self, mocap_pos: np.ndarray, mocap_quat: np.ndarray) -> None:
         """Take the world's moving bodies' poses into the pre-flight's collision model, so that
