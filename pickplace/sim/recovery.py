@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from mink.lie import SE3, SO3
@@ -61,6 +61,7 @@ from pickplace.errors import InvalidInputError, ObjectError, PlanError, require_
 from pickplace.geometry import FloatArray, box_resting_frame, turned_half_extents, upright_turn
 from pickplace.planning.plan import Plan
 from pickplace.planning.planner import PickPlacePlanner, PlanningReport, Start
+from pickplace.planning.push import PushTrajectory
 from pickplace.planning.trajectory import Keyframe, PoseTrajectory, profile_by_name
 from pickplace.sim.checks import Failure, FailureReason
 from pickplace.sim.task import RunControl
@@ -102,6 +103,10 @@ _SINE = profile_by_name("sine")
 PLACE_SHIFTS: tuple[float, ...] = (0.02, 0.04, 0.06, 0.08)
 """How far a held replan may move the brick's goal away from what blocks its place [m], in
 the order tried (:meth:`Reattempt._held_elsewhere`)."""
+
+MAX_PUSHES = 2
+"""The most pushes one attempt makes before its pick (:meth:`Reattempt._after_push`): a
+second where the first left the object where no grasp fits after all."""
 
 MAX_ATTEMPTS = 10
 """The most attempts a run may take (``--attempts``)."""
@@ -368,6 +373,7 @@ class Reattempt:
         self.max_attempts = check_attempts(attempts)
         self.config = config or RecoveryConfig()
         self._attempts: list[Attempt] = [Attempt(1, 0, 0.0, first_candidate)]
+        self._pushes = 0  # pushes finished in the current attempt
         self._stop: StopTrajectory | None = None  # while stopping and waiting
         self._taken: Failure | None = None  # the failure taken up, while stopping
 
@@ -381,6 +387,7 @@ class Reattempt:
         docstring) and return True."""
         if (
             self._stop is not None
+            or isinstance(run.plan.trajectory, PushTrajectory)  # nothing to try again from
             or len(self._attempts) >= self.max_attempts
             or not failures
             or run.ticks < 1
@@ -438,6 +445,7 @@ class Reattempt:
             (failure.tick + 1) * dt,
             text,
             run.ticks,
+            current.pushes,
         )
         self._stop, self._taken = stop, failure
         return True
@@ -457,6 +465,8 @@ class Reattempt:
         plan the next attempt from there and put it in place; give up (the failure taken up,
         with why) when the brick does not rest in time or no plan is feasible."""
         stop, taken = self._stop, self._taken
+        if stop is None and isinstance(run.plan.trajectory, PushTrajectory):
+            return self._after_push(run, run.plan.trajectory)
         if stop is None or taken is None:
             return None
         t_plan = run.ticks * run.dt - run.plan_start
@@ -517,6 +527,80 @@ class Reattempt:
             f"{standing}",
         )
 
+    def _after_push(self, run: RunControl, push: PushTrajectory) -> Failure | None:
+        """After a push (:mod:`pickplace.planning.push`): once the tool has backed away and
+        the object rests free of the robot, plan its pick from where it lies (or, while the
+        attempt has made fewer than :data:`MAX_PUSHES`, another push where no grasp is
+        feasible) and put that plan in place, the same attempt going on; ``no-feasible-plan``,
+        saying why, when the object does not come to rest in time, rests tilted, or no grasp
+        of it is feasible where it came to rest."""
+        t_plan = run.ticks * run.dt - run.plan_start
+        if t_plan < push.push_end_time:
+            return None
+        label = push.push.label
+        tick = run.ticks - 1
+        ready, why = self._brick_ready(run)
+        if not ready:
+            if t_plan >= push.push_end_time + self.config.max_wait:
+                return Failure(
+                    tick,
+                    FailureReason.NO_FEASIBLE_PLAN,
+                    f"after the push ({label}) {why} {self.config.max_wait:g} s after the arm "
+                    "backed away",
+                )
+            return None
+        X_WO = brick_pose(run.scene, run.data)
+        tilt = lying_tilt(run.scene, X_WO)
+        if tilt > run.criteria.max_tilt:
+            return Failure(
+                tick,
+                FailureReason.NO_FEASIBLE_PLAN,
+                f"after the push ({label}) the object came to rest tilted "
+                f"{math.degrees(tilt):.0f} deg from lying flat (at most "
+                f"{math.degrees(run.criteria.max_tilt):.0f} deg)",
+            )
+        box = run.scene.object.box_half_extents
+        X_WO_plan = X_WO if box is None else box_resting_frame(X_WO, box)
+        if X_WO_plan is None:
+            return Failure(
+                tick,
+                FailureReason.NO_FEASIBLE_PLAN,
+                f"after the push ({label}) the box came to rest standing on a face of another size",
+            )
+        start = Start(run.q_cmd.copy(), push.keyframes[-1].X_WG)
+        self._pushes += 1
+        self._attempts[-1] = replace(self._attempts[-1], pushes=self._pushes)
+        again = self._pushes < MAX_PUSHES
+        report = self.planner.plan(X_WO_plan, self.X_WO_goal, start=start, push=again)
+        p = X_WO.translation()
+        where = f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
+        if not report.feasible:
+            return Failure(
+                tick,
+                FailureReason.NO_FEASIBLE_PLAN,
+                f"after the push ({label}) no plan picks the object where it came to rest, at "
+                f"{where}: {report.refusal()}",
+            )
+        assert report.chosen is not None
+        chosen = report.candidates[report.chosen]
+        current = self._attempts[-1]
+        what = (
+            "pushes it on from where it came to rest"
+            if isinstance(report.plan.trajectory, PushTrajectory)
+            else "picks the object where it came to rest"
+        )
+        try:
+            run.replace_plan(
+                report.plan,
+                run.ticks * run.dt,
+                f"after the push ({label}) plan '{chosen.label}' (candidate "
+                f"{report.chosen + 1} of {len(report.candidates)}) {what}, at {where}",
+            )
+        except InvalidInputError as exc:  # the run's log would pass its memory bound
+            return Failure(tick, FailureReason.NO_FEASIBLE_PLAN, str(exc))
+        self._attempts[-1] = replace(current, candidate=f"{current.candidate}, then {chosen.label}")
+        return None
+
     def _put_in_place(
         self, run: RunControl, report: PlanningReport, taken: Failure, what: str
     ) -> Failure | None:
@@ -536,6 +620,7 @@ class Reattempt:
             return self._give_up(taken, str(exc))
         self._attempts.append(Attempt(number, run.ticks, run.ticks * run.dt, chosen.label))
         self._stop = self._taken = None
+        self._pushes = 0
         return None
 
     def _replan_held(self, run: RunControl, stop: StopTrajectory, taken: Failure) -> Failure | None:
@@ -628,13 +713,14 @@ class Reattempt:
         self._stop = self._taken = None
         last = self._attempts[-1]
         self._attempts[-1] = Attempt(
-            last.number, last.start_tick, last.start_time_s, last.candidate
+            last.number, last.start_tick, last.start_time_s, last.candidate, pushes=last.pushes
         )
         return Failure(taken.tick, taken.reason, f"{taken.text}; not recovered: {why}")
 
 
 __all__ = [
     "MAX_ATTEMPTS",
+    "MAX_PUSHES",
     "PLACE_SHIFTS",
     "RECOVERABLE",
     "CommandedDrift",

@@ -76,9 +76,12 @@ class BuildRequest:
     timing: TimingConfig = field(default_factory=TimingConfig)
     attempts: int = 1
 
-    def planner(self) -> PickPlacePlanner:
-        """A planner for this request's scene, controller and timing."""
-        return PickPlacePlanner(self.scene, self.controller, timing=self.timing, seed=self.seed)
+    def planner(self, push: bool = True) -> PickPlacePlanner:
+        """A planner for this request's scene, controller and timing; with ``push`` it
+        pushes the brick from a wall where no grasp fits (:mod:`pickplace.planning.push`)."""
+        return PickPlacePlanner(
+            self.scene, self.controller, timing=self.timing, seed=self.seed, push=push
+        )
 
 
 def pick_place_task(
@@ -265,6 +268,8 @@ def _random(req: BuildRequest) -> Task:
     """A brick pose drawn from the seed, drawn again (same generator) until the planner finds
     a feasible plan, at most :data:`MAX_RANDOM_DRAWS` times (a robot that finds none ends
     ``no-feasible-plan`` with the last draw's problems); a given ``--brick`` is planned as is.
+    Its planner does not push (:mod:`pickplace.planning.push`): a pose no grasp fits is drawn
+    again, as it always was, so that a seed's pose is the same as before pushes existed.
 
     A brick too heavy for the grip is planned all the same (with the timing's warning, see
     :mod:`pickplace.planning.planner`): whether it is held is the physics' to show.
@@ -272,7 +277,7 @@ def _random(req: BuildRequest) -> Task:
     if req.brick is not None:
         return pick_place_task(req, req.brick)
     rng = np.random.default_rng(req.seed)
-    planner = req.planner()
+    planner = req.planner(push=False)
     for _ in range(MAX_RANDOM_DRAWS):
         task = pick_place_task(req, random_placement(req.scene, rng), planner=planner)
         if task.planning is not None and task.planning.feasible:

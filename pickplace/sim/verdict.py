@@ -187,6 +187,8 @@ class Attempt:
         failure_time_s: Run time at the end of that tick [s].
         failure_text: Its text, as a failure event would say it (``"dropped: ..."``).
         stop_tick: Tick from which the arm was brought to a stop after the failure.
+        pushes: Pushes of the object its plan made before the pick (where no grasp fit,
+            :mod:`pickplace.planning.push`), each counted once the tool had backed away.
     """
 
     number: int
@@ -198,6 +200,7 @@ class Attempt:
     failure_time_s: float | None = None
     failure_text: str | None = None
     stop_tick: int | None = None
+    pushes: int = 0
 
 
 def attempt_rows(
@@ -224,6 +227,7 @@ def attempt_rows(
                 "failure_time_s": t,
                 "failure_text": result.failure_text if last else a.failure_text,
                 "stop_tick": a.stop_tick,
+                "pushes": a.pushes,
             }
         )
     replans = [

@@ -164,6 +164,7 @@ def outcome_report(
     place = percentiles(errors)
     slips = [t["max_slip_m"] for t in full if t.get("max_slip_m") is not None]
     replanned = [t for t in full if (t.get("attempts") or 1) > 1]
+    pushed = [t for t in full if t.get("pushes")]
     return {
         "completed": len(trials),
         "successes": len(ok),
@@ -182,6 +183,10 @@ def outcome_report(
         "replanned": {
             "trials": len(replanned),
             "successes": sum(1 for t in replanned if t["success"]),
+        },
+        "pushed": {
+            "trials": len(pushed),
+            "successes": sum(1 for t in pushed if t["success"]),
         },
     }
 
@@ -293,6 +298,12 @@ def _outcome_lines(r: Mapping[str, Any], plan_units: Mapping[str, str], indent: 
         lines.append(
             f"{indent}replanned: {replanned['trials']} trials took more than one attempt "
             f"(--attempts), {replanned['successes']} of them succeeded"
+        )
+    pushed = r.get("pushed") or {}
+    if pushed.get("trials"):
+        lines.append(
+            f"{indent}pushed: {pushed['trials']} trials pushed the object from a wall before "
+            f"the pick, {pushed['successes']} of them succeeded"
         )
     for reason, f in r["failures"].items():
         seeds = f["seeds"]

@@ -121,12 +121,14 @@ class TrialSpec:
 def compact_summary(result: RunResult, arm: str = "") -> dict[str, Any]:
     """The part of a run a sweep keeps: the summary's :data:`TRIAL_KEYS`, the result's
     ``failure_text`` (:attr:`~pickplace.sim.verdict.RunResult.failure_text`), ``parameters``
-    (when varied) and ``arm`` (in a comparison). A non-finite number becomes None (JSON has
+    (when varied), ``arm`` (in a comparison), the number of ``attempts`` and of ``pushes``
+    (over all attempts). A non-finite number becomes None (JSON has
     no NaN)."""
     summary = result.summary()
     out = {k: _finite_or_none(summary.get(k)) for k in TRIAL_KEYS}
     out["failure_text"] = result.failure_text
     out["attempts"] = len(summary["attempts"])
+    out["pushes"] = sum(a["pushes"] for a in summary["attempts"])
     if result.parameters is not None:
         out["parameters"] = result.parameters
     if arm:
