@@ -328,6 +328,37 @@ def planning_times(name: str = "brick") -> dict[str, float]:
     return {k + suffix: v for k, v in figures.items()}
 
 
+# The pushing figures: the robot whose long palm leaves the most poses beside the walls
+# without a grasp, and the uniform poses drawn (their refused ones are planned with pushes).
+PUSH_ROBOT = "menagerie-panda-hand"
+PUSH_POSES = 100
+
+
+def push_planning_times(poses: int = PUSH_POSES) -> dict[str, Any]:
+    """Planning with pushes (pickplace/planning/push.py): over ``poses`` uniform poses of
+    PUSH_ROBOT, those no grasp candidate is feasible at (planned without pushes) planned again
+    with them: how many, the fraction a push was found for, and that planning's p50 and max
+    wall time [ms]."""
+    scene = load_scene(None, PUSH_ROBOT)
+    planner = PickPlacePlanner(scene, "qp")
+    X_place = brick_on_floor(scene, target_placement(scene), scene.target_bin.floor_top_z)
+    floor = scene.source_bin.floor_top_z
+    times, found = [], 0
+    for seed in range(poses):
+        X_pick = brick_on_floor(scene, uniform_placement(scene, np.random.default_rng(seed)), floor)
+        if planner.plan(X_pick, X_place, push=False).feasible:
+            continue
+        report = planner.plan(X_pick, X_place)
+        times.append(report.planning_time_s * 1e3)
+        found += report.feasible
+    return {
+        "push_refused_poses": len(times),
+        "push_found_fraction": found / len(times) if times else None,
+        "push_planning_ms_p50": float(np.percentile(times, 50)) if times else None,
+        "push_planning_ms_max": max(times, default=None),
+    }
+
+
 # The divider of the C-space planning figures [m]: the Cartesian transfer's brick runs into it.
 CSPACE_DIVIDER = 0.26
 CSPACE_FIRST_SEED = 90000
@@ -564,6 +595,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--cspace-only", action="store_true", help="only the planning times with C-space paths"
     )
+    parser.add_argument(
+        "--push-only", action="store_true", help="only the planning times with pushes"
+    )
     parser.add_argument("--cells", type=int, default=30, help="obstacle cells planned")
     parser.add_argument(
         "--collision-only", action="store_true", help="only the qp collision limit's cost"
@@ -573,6 +607,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     report: dict[str, Any] = {"machine_cpus": os.cpu_count()}
+    if args.push_only:
+        report.update(push_planning_times())
+        print(json.dumps(report) if args.json else _table(report, {}))
+        return 0
     if args.cspace_only:
         report.update(cspace_planning_times(args.cells))
         print(json.dumps(report) if args.json else _table(report, {}))
@@ -631,6 +669,7 @@ def main(argv: list[str] | None = None) -> int:
     report.update(planning_times())
     for name in ("can", "ball", "jar"):
         report.update(planning_times(name))
+    report.update(push_planning_times())
     report.update(cspace_planning_times(args.cells))
     report["physics_share_of_tick"] = report["tick_us_physics"] / report["tick_us_total"]
     report.update(compose_times())
