@@ -10,7 +10,13 @@ import pytest
 from mink.lie import SE3
 
 from pickplace.planning.planner import PickPlacePlanner
-from pickplace.planning.push import PUSH_FLOOR_GAP, Push, PushTrajectory, push_directions
+from pickplace.planning.push import (
+    PUSH_FLOOR_GAP,
+    PUSH_OVERSHOOT,
+    Push,
+    PushTrajectory,
+    push_directions,
+)
 from pickplace.run.runner import RunRequest, object_world, prepare
 from pickplace.sim.loader import load_scene
 from pickplace.world.placements import (
@@ -203,7 +209,8 @@ def test_without_pushes_the_planner_never_chooses_one() -> None:
 def test_a_pushed_brick_is_picked_where_it_came_to_rest_and_placed(robot: str) -> None:
     """The first two refused poses of the draw that get a push, simulated: the run succeeds in
     one attempt whose candidate names the push and then the grasp, the pick planned from where
-    the physics left the brick (the replan event), within 10 mm of the push's prediction."""
+    the physics left the brick (the replan event), nearer the push's prediction than the
+    overshoot the push is planned with (PUSH_OVERSHOOT)."""
     scene, planner, refused = _refused(robot)
     runs = 0
     for p, X in refused:
@@ -220,7 +227,8 @@ def test_a_pushed_brick_is_picked_where_it_came_to_rest_and_placed(robot: str) -
         replans = [e for e in result.events if e.kind.value == "replan"]
         assert len(replans) == 1 and "after the push" in replans[0].text
         rested = sim.log.body_pos[replans[0].tick - 1, scene.brick_body_id]
-        assert np.linalg.norm(rested[:2] - push.X_WO_after.translation()[:2]) < 0.010
+        # Within the overshoot the push is planned with beyond the shortest feasible push.
+        assert np.linalg.norm(rested[:2] - push.X_WO_after.translation()[:2]) < PUSH_OVERSHOOT
         runs += 1
         if runs == 2:
             break

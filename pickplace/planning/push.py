@@ -133,7 +133,7 @@ class Push:
     """One push of the object across the bin's floor.
 
     Attributes:
-        label: In words, e.g. ``"push the object 45 mm along +y of bin1 (from its -y wall)"``.
+        label: In words, e.g. ``"push the object 45 mm away from bin1's -x wall"``.
         d_W: The push's direction, horizontal unit vector in world.
         distance: How far the tool pushes once it touches [m].
         touch: How far the tool moves along the push from its start before the hand touches

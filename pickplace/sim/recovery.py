@@ -541,12 +541,13 @@ class Reattempt:
         tick = run.ticks - 1
         ready, why = self._brick_ready(run)
         if not ready:
-            if t_plan >= push.push_end_time + self.config.max_wait:
+            # Within the push's own hold (half of it: the loop ends a plan whose brick rests).
+            wait = min(self.config.max_wait, 0.5 * (push.end_time - push.push_end_time))
+            if t_plan >= push.push_end_time + wait:
                 return Failure(
                     tick,
                     FailureReason.NO_FEASIBLE_PLAN,
-                    f"after the push ({label}) {why} {self.config.max_wait:g} s after the arm "
-                    "backed away",
+                    f"after the push ({label}) {why} {wait:g} s after the arm backed away",
                 )
             return None
         X_WO = brick_pose(run.scene, run.data)
