@@ -19,10 +19,13 @@ from pickplace.planning.push import (
 )
 from pickplace.run.runner import RunRequest, object_world, prepare
 from pickplace.sim.loader import load_scene
+from pickplace.sim.recovery import Reattempt
+from pickplace.sim.scenarios import BuildRequest, get_scenario
 from pickplace.world.placements import (
     BrickPlacement,
     brick_on_floor,
     footprint_inside,
+    random_placement,
     target_placement,
     uniform_placement,
     yaw_of_bin,
@@ -233,3 +236,26 @@ def test_a_pushed_brick_is_picked_where_it_came_to_rest_and_placed(robot: str) -
         if runs == 2:
             break
     assert runs, "no refused pose of the draw was pushed"
+
+
+def test_pick_place_random_draws_again_without_pushing_and_its_replans_may_push() -> None:
+    """pick-place-random's draws plan without pushes: a first draw no grasp fits (found among
+    the seeds of this test's scan) is drawn again, not pushed; the task's recovery, planning
+    with the same planner, may push."""
+    scene = load_scene(robot="menagerie-panda-hand")
+    off = PickPlacePlanner(scene, "qp", push=False)
+    X_place = _place(scene)
+    for seed in range(DRAW_SEED, DRAW_SEED + 200):
+        first = random_placement(scene, np.random.default_rng(seed))
+        X = brick_on_floor(scene, first, scene.source_bin.floor_top_z)
+        if not off.plan(X, X_place).feasible:
+            break
+    else:
+        pytest.fail("no first draw of the scan is refused: nothing tested")
+    task = get_scenario("pick-place-random").build(
+        BuildRequest(scene, "pick-place-random", seed, attempts=3)
+    )
+    assert task.planning is not None and task.planning.feasible
+    assert not isinstance(task.plan.trajectory, PushTrajectory)
+    assert not np.allclose(task.X_WO_start.translation(), X.translation())
+    assert isinstance(task.recovery, Reattempt) and task.recovery.planner.push

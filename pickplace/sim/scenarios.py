@@ -268,8 +268,9 @@ def _random(req: BuildRequest) -> Task:
     """A brick pose drawn from the seed, drawn again (same generator) until the planner finds
     a feasible plan, at most :data:`MAX_RANDOM_DRAWS` times (a robot that finds none ends
     ``no-feasible-plan`` with the last draw's problems); a given ``--brick`` is planned as is.
-    Its planner does not push (:mod:`pickplace.planning.push`): a pose no grasp fits is drawn
-    again, as it always was, so that a seed's pose is the same as before pushes existed.
+    The draws are planned without pushes (:mod:`pickplace.planning.push`): a pose no grasp
+    fits is drawn again, as it always was, so that a seed's pose is the same as before pushes
+    existed; the recovery's replans after a miss or a drop may push.
 
     A brick too heavy for the grip is planned all the same (with the timing's warning, see
     :mod:`pickplace.planning.planner`): whether it is held is the physics' to show.
@@ -281,8 +282,10 @@ def _random(req: BuildRequest) -> Task:
     for _ in range(MAX_RANDOM_DRAWS):
         task = pick_place_task(req, random_placement(req.scene, rng), planner=planner)
         if task.planning is not None and task.planning.feasible:
-            return task
-    return task  # none of the draws: the last one's no-feasible-plan says why
+            break
+    # The draw is made; the recovery's replans (the same planner) may push the brick.
+    planner.push = True
+    return task  # or none of the draws: the last one's no-feasible-plan says why
 
 
 def _uniform(req: BuildRequest) -> Task:
