@@ -529,7 +529,7 @@ def _scene_and_task_of(run: ResolvedRun, refuse_infeasible: bool) -> tuple[Scene
         raise InvalidInputError(
             f"no feasible plan picks the brick at x={b.x:g} m, y={b.y:g} m, yaw={b.yaw:g} rad: "
             f"{len(planning.candidates)} of {planning.ranked} candidates pre-flighted, the best "
-            f"({first.label}) {why}; "
+            f"({first.label}) {why}, and no push frees it from the walls; "
             f"move it inwards or turn it (pickplace plan --brick={b.x:g},{b.y:g},{b.yaw:g} "
             "lists every candidate)",
             field="brick",
