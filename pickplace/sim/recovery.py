@@ -435,17 +435,13 @@ class Reattempt:
             )
         except InvalidInputError:  # the run's log would pass its memory bound
             return False
-        self._attempts[-1] = Attempt(
-            current.number,
-            current.start_tick,
-            current.start_time_s,
-            current.candidate,
-            failure.reason,
-            failure.tick,
-            (failure.tick + 1) * dt,
-            text,
-            run.ticks,
-            current.pushes,
+        self._attempts[-1] = replace(
+            current,
+            failure=failure.reason,
+            failure_tick=failure.tick,
+            failure_time_s=(failure.tick + 1) * dt,
+            failure_text=text,
+            stop_tick=run.ticks,
         )
         self._stop, self._taken = stop, failure
         return True
@@ -483,13 +479,42 @@ class Reattempt:
                     taken, f"{why} {self.config.max_wait:g} s after the arm stopped"
                 )
             return None
+        start = Start(run.q_cmd.copy(), stop.X_WG_rest)
+        planned = self._plan_where_it_rests(run, start)
+        if isinstance(planned, str):
+            return self._give_up(taken, planned)
+        report, X_WO, standing = planned
+        p = X_WO.translation()
+        if not report.feasible:
+            return self._give_up(
+                taken,
+                f"no new plan picks it where it lies at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) "
+                f"m: {report.refusal()}",
+            )
+        assert report.chosen is not None
+        return self._put_in_place(
+            run,
+            report,
+            taken,
+            f"plan '{{label}}' (candidate {report.chosen + 1} of {len(report.candidates)}) "
+            f"picks the brick where it rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
+            f"{standing}",
+        )
+
+    def _plan_where_it_rests(
+        self, run: RunControl, start: Start, push: bool | None = None
+    ) -> tuple[PlanningReport, SE3, str] | str:
+        """Plan the pick of the brick resting where the simulation has it, from ``start``
+        (``push``: the planner's, see :meth:`PickPlacePlanner.plan`): the report, the pose
+        planned and, for a brick standing on its end, words saying so; or why it cannot be
+        planned (it rests tilted, or standing where no grasp fits), words that end a
+        sentence."""
         X_WO_lying = brick_pose(run.scene, run.data)
         tilt = lying_tilt(run.scene, X_WO_lying)
         if tilt > run.criteria.max_tilt:
-            return self._give_up(
-                taken,
+            return (
                 f"the brick came to rest tilted {math.degrees(tilt):.0f} deg from lying flat "
-                f"(at most {math.degrees(run.criteria.max_tilt):.0f} deg)",
+                f"(at most {math.degrees(run.criteria.max_tilt):.0f} deg)"
             )
         # Upside down or on a side of the same size, the brick is the same box with its frame
         # turned: the planner plans for that frame. On a face of another size (on its end) it
@@ -504,36 +529,20 @@ class Reattempt:
             X_WO_goal = standing_goal(self.X_WO_goal, box, turn)
             tall = 2000.0 * float(np.abs(X_WO.rotation().as_matrix()[2, :]) @ box)
             standing = f", standing {tall:.0f} mm tall (placed so)"
-        start = Start(run.q_cmd.copy(), stop.X_WG_rest)
         try:
-            report = self.planner.plan(X_WO, X_WO_goal, start=start, turn=turn)
+            report = self.planner.plan(X_WO, X_WO_goal, start=start, turn=turn, push=push)
         except (ObjectError, PlanError) as exc:  # the box standing: no grasp of it fits
-            return self._give_up(taken, f"it rests standing: {exc}")
-        if not report.feasible:
-            p = X_WO.translation()
-            return self._give_up(
-                taken,
-                f"no new plan picks it where it lies at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) "
-                f"m: {report.refusal()}",
-            )
-        assert report.chosen is not None
-        p = X_WO.translation()
-        return self._put_in_place(
-            run,
-            report,
-            taken,
-            f"plan '{{label}}' (candidate {report.chosen + 1} of {len(report.candidates)}) "
-            f"picks the brick where it rests, at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
-            f"{standing}",
-        )
+            return f"it rests standing: {exc}"
+        return report, X_WO, standing
 
     def _after_push(self, run: RunControl, push: PushTrajectory) -> Failure | None:
         """After a push (:mod:`pickplace.planning.push`): once the tool has backed away and
         the object rests free of the robot, plan its pick from where it lies (or, while the
         attempt has made fewer than :data:`MAX_PUSHES`, another push where no grasp is
-        feasible) and put that plan in place, the same attempt going on; ``no-feasible-plan``,
-        saying why, when the object does not come to rest in time, rests tilted, or no grasp
-        of it is feasible where it came to rest."""
+        feasible) and put that plan in place, the same attempt going on, as
+        :meth:`after_block` plans after a miss (a box on its end planned standing);
+        ``no-feasible-plan``, saying why, when the object does not come to rest in time, rests
+        tilted, or no grasp of it is feasible where it came to rest."""
         t_plan = run.ticks * run.dt - run.plan_start
         if t_plan < push.push_end_time:
             return None
@@ -550,31 +559,17 @@ class Reattempt:
                     f"after the push ({label}) {why} {wait:g} s after the arm backed away",
                 )
             return None
-        X_WO = brick_pose(run.scene, run.data)
-        tilt = lying_tilt(run.scene, X_WO)
-        if tilt > run.criteria.max_tilt:
-            return Failure(
-                tick,
-                FailureReason.NO_FEASIBLE_PLAN,
-                f"after the push ({label}) the object came to rest tilted "
-                f"{math.degrees(tilt):.0f} deg from lying flat (at most "
-                f"{math.degrees(run.criteria.max_tilt):.0f} deg)",
-            )
-        box = run.scene.object.box_half_extents
-        X_WO_plan = X_WO if box is None else box_resting_frame(X_WO, box)
-        if X_WO_plan is None:
-            return Failure(
-                tick,
-                FailureReason.NO_FEASIBLE_PLAN,
-                f"after the push ({label}) the box came to rest standing on a face of another size",
-            )
         start = Start(run.q_cmd.copy(), push.keyframes[-1].X_WG)
         self._pushes += 1
         self._attempts[-1] = replace(self._attempts[-1], pushes=self._pushes)
-        again = self._pushes < MAX_PUSHES
-        report = self.planner.plan(X_WO_plan, self.X_WO_goal, start=start, push=again)
+        planned = self._plan_where_it_rests(run, start, push=self._pushes < MAX_PUSHES)
+        if isinstance(planned, str):
+            return Failure(
+                tick, FailureReason.NO_FEASIBLE_PLAN, f"after the push ({label}) {planned}"
+            )
+        report, X_WO, standing = planned
         p = X_WO.translation()
-        where = f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
+        where = f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m{standing}"
         if not report.feasible:
             return Failure(
                 tick,
@@ -712,9 +707,13 @@ class Reattempt:
         """The failure taken up, ending the run at its tick, its text saying why it was not
         recovered; the attempt it ended is the run's last."""
         self._stop = self._taken = None
-        last = self._attempts[-1]
-        self._attempts[-1] = Attempt(
-            last.number, last.start_tick, last.start_time_s, last.candidate, pushes=last.pushes
+        self._attempts[-1] = replace(
+            self._attempts[-1],
+            failure=None,
+            failure_tick=None,
+            failure_time_s=None,
+            failure_text=None,
+            stop_tick=None,
         )
         return Failure(taken.tick, taken.reason, f"{taken.text}; not recovered: {why}")
 
