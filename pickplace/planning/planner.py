@@ -164,6 +164,16 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _at_half_speed(config: PlanConfig) -> PlanConfig:
+    """``config`` with its Cartesian speed limits halved (a path the joints fell behind, swept
+    or timed again at half the speed)."""
+    return replace(
+        config,
+        max_linear_speed=0.5 * config.max_linear_speed,
+        max_angular_speed=0.5 * config.max_angular_speed,
+    )
+
+
 MAX_PUSH_PREFLIGHTS = 6
 """Most pushes pre-flighted in one planning (:mod:`pickplace.planning.push`), shortest first:
 a push whose hand meets a wall on the way down (the arm's links, not the hand, which the
@@ -652,15 +662,7 @@ class PickPlacePlanner:
             height = 2.0 * float(scene.object.half_extents[2])
             self._set = self._clear_of_hand(GraspSet.of(grasps, self.p_O_com), height)
             self._grasps = self._set.grasps
-            self.pusher = Pusher(
-                scene,
-                self.hand,
-                HandObjectGaps(self.hand, scene.object),
-                self.config,
-                self.preflight.config.clearance,
-                self.clearance_z,
-                yaw_of(self.X_WG_home.rotation()),
-            )
+            self._pusher: Pusher | None = None  # made on the first push search
         else:
             shape = scene.object
             narrowest = 2.0 * shape.min_footprint_half
@@ -683,6 +685,22 @@ class PickPlacePlanner:
         # The C-space metric: each joint's lever arm over the links after it, the hand and
         # the brick (the farthest of their points from the tool).
         self.lever_arms = lever_arms(kin, robot.q_home, self._hand_reach())
+
+    @property
+    def pusher(self) -> Pusher:
+        """The push planner of this planner's hand and object (:mod:`pickplace.planning.push`),
+        made when first asked for: only a pose no grasp fits needs it."""
+        if self._pusher is None:
+            self._pusher = Pusher(
+                self.scene,
+                self.hand,
+                HandObjectGaps(self.hand, self.scene.object),
+                self.config.closed_width,
+                self.preflight.config.clearance,
+                self.clearance_z,
+                yaw_of(self.X_WG_home.rotation()),
+            )
+        return self._pusher
 
     def footprint_of(self, geom_ids: np.ndarray) -> HandFootprint:
         """The collision boxes of the hand's geoms ``geom_ids`` on the pre-flight's model, at
@@ -829,11 +847,7 @@ class PickPlacePlanner:
                 problem = result.problem
                 if problem is None or problem.kind not in ("speed-limit", "ik"):
                     break
-                config = replace(
-                    config,
-                    max_linear_speed=0.5 * config.max_linear_speed,
-                    max_angular_speed=0.5 * config.max_angular_speed,
-                )
+                config = _at_half_speed(config)
             if result.feasible:
                 return Candidate(push.label, plan, result)
             traj = plan.trajectory
@@ -1248,11 +1262,7 @@ class PickPlacePlanner:
                 break
             # The sweep outran the joints (its speed is the pre-flight's spacing, not the
             # robot's): the same path again at half the speed, twice the ticks.
-            sweep = replace(
-                sweep,
-                max_linear_speed=0.5 * sweep.max_linear_speed,
-                max_angular_speed=0.5 * sweep.max_angular_speed,
-            )
+            sweep = _at_half_speed(sweep)
         if not swept.feasible:
             return path, swept, None
         return self._timed(path, swept, X_WO_pick, X_WO_place, q_start)

@@ -216,7 +216,7 @@ class Pusher:
         scene: The scene.
         hand: The hand's collision geoms (all of them) in the tool frame.
         gaps: The same geoms against the object.
-        config: The planner's Cartesian limits (the push is timed by them).
+        closed_width: The finger gap commanded closed [m] (the planner's).
         clearance: The pre-flight's clearance [m].
         clearance_z: The transfer height of the tool [m].
         home_yaw: The tool's yaw at home [rad] (of two hand poses a half turn apart, the one
@@ -228,7 +228,7 @@ class Pusher:
         scene: Scene,
         hand: HandFootprint,
         gaps: HandObjectGaps,
-        config: PlanConfig,
+        closed_width: float,
         clearance: float,
         clearance_z: float,
         home_yaw: float,
@@ -236,11 +236,10 @@ class Pusher:
         self.scene = scene
         self.hand = hand
         self.gaps = gaps
-        self.config = config
         self.clearance = float(clearance)
         self.clearance_z = float(clearance_z)
         self.home_yaw = float(home_yaw)
-        self.width = float(config.closed_width)
+        self.width = float(closed_width)
         self.hull = hand.hull_G(self.width)  # the closed hand's hull vertices in G
         # The hulls' edges, as pairs of indices into ``hull`` (each geom's after the others').
         counts = np.bincount(hand.hull_geom, minlength=len(hand.geom_ids))
