@@ -157,19 +157,22 @@ class PushTrajectory(PoseTrajectory):
     """A push's tool trajectory: its keyframes timed, and the push it carries out.
 
     Args:
-        keyframes: The timed keyframes (the last one the hold's end).
+        keyframes: The timed keyframes (:meth:`Pusher.plan`'s, by name: ``push-start`` where
+            the tool is behind the object, ``push-retreat`` where it is back up, then the
+            hold).
         profile: Motion profile name.
         push: The push.
-        end_time: When the tool reaches the hold after the push [s]: from then on the run
-            waits for the object to rest and plans its pick.
     """
 
-    def __init__(self, keyframes: list[Keyframe], profile: str, push: Push, end_time: float):
+    def __init__(self, keyframes: list[Keyframe], profile: str, push: Push):
         super().__init__(keyframes, profile)
         self.push = push
-        self.push_end_time = float(end_time)
-        self.push_start_time = next(k.t for k in keyframes if k.name == "push-start")
+        times = {k.name: k.t for k in keyframes}
+        self.push_start_time = times["push-start"]
         """When the tool reaches the push's start, behind the object [s]."""
+        self.push_end_time = times["push-retreat"]
+        """When the tool is back up after the push [s]: from then on the run waits for the
+        object to rest and plans its pick."""
 
 
 def push_directions(scene: Scene, X_WO: SE3, bin_: BinGeometry) -> list[tuple[np.ndarray, str]]:
@@ -494,7 +497,7 @@ class Pusher:
         keyframes = time_keyframes(waypoints, config)
         end = keyframes[-1]
         keyframes.append(Keyframe("push-hold", end.t + PUSH_HOLD, end.X_WG, w))
-        traj = PushTrajectory(keyframes, config.profile, push, end.t)
+        traj = PushTrajectory(keyframes, config.profile, push)
         return Plan(traj)
 
 
